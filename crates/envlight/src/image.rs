@@ -1,0 +1,269 @@
+//! The environment image: linear RGB `f32` texels on a `width × height` grid, row 0 at
+//! the top, with nearest and bilinear lookups (u wraps, v clamps).
+//!
+//! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
+
+use crate::error::{Error, Result, TexelPos};
+
+/// How radiance between texel centres is reconstructed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Lookup {
+    /// The texel that contains `(u, v)`.
+    Nearest,
+    /// Bilinear interpolation between the four nearest texel centres
+    /// (centres at `((i+.5)/w, (j+.5)/h)`), wrapping in u and clamping in v.
+    #[default]
+    Bilinear,
+}
+
+/// A linear-RGB environment image. Every texel is finite and non-negative (the
+/// constructors guarantee it), so no NaN can come out of a lookup.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvImage {
+    width: usize,
+    height: usize,
+    texels: Vec<[f32; 3]>,
+}
+
+/// What validation changed while an image was built from raw texels.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sanitized {
+    /// Texels with at least one negative channel; those channels were set to 0.
+    pub negative_texels: usize,
+    /// The most negative channel value seen (0 when there was none).
+    pub most_negative: f32,
+    /// Texels with a NaN or infinite channel that were replaced by 0 (only when the
+    /// caller asked for replacement; otherwise such a texel is an error).
+    pub non_finite_texels: usize,
+}
+
+impl EnvImage {
+    /// Builds an image from texels in row-major order (row 0 at the top).
+    ///
+    /// # Errors
+    /// [`Error::InvalidDimensions`] when a side is 0 or `texels.len() != width*height`;
+    /// [`Error::NonFiniteTexel`] for the first NaN/infinite channel;
+    /// [`Error::InvalidOption`] for a negative channel (use [`EnvImage::from_raw`] to
+    /// clamp instead).
+    pub fn new(width: usize, height: usize, texels: Vec<[f32; 3]>) -> Result<Self> {
+        let (image, report) = Self::from_raw("<memory>", width, height, texels, false)?;
+        if report.negative_texels > 0 {
+            return Err(Error::InvalidOption(format!(
+                "{} texels have negative channels (most negative {})",
+                report.negative_texels, report.most_negative
+            )));
+        }
+        Ok(image)
+    }
+
+    /// Builds an image by evaluating `f(x, y)` at every texel.
+    ///
+    /// # Errors
+    /// As [`EnvImage::new`].
+    pub fn from_fn(
+        width: usize,
+        height: usize,
+        mut f: impl FnMut(usize, usize) -> [f32; 3],
+    ) -> Result<Self> {
+        let mut texels = Vec::with_capacity(width.saturating_mul(height));
+        for y in 0..height {
+            for x in 0..width {
+                texels.push(f(x, y));
+            }
+        }
+        Self::new(width, height, texels)
+    }
+
+    /// Validates raw decoded texels: negative channels are clamped to 0 and counted;
+    /// a NaN or infinite channel is an error naming `source_name` and the texel, or,
+    /// with `replace_non_finite`, is replaced by 0 and counted.
+    ///
+    /// # Errors
+    /// [`Error::InvalidDimensions`], [`Error::NonFiniteTexel`].
+    pub fn from_raw(
+        source_name: &str,
+        width: usize,
+        height: usize,
+        mut texels: Vec<[f32; 3]>,
+        replace_non_finite: bool,
+    ) -> Result<(Self, Sanitized)> {
+        if width == 0 || height == 0 || width.checked_mul(height) != Some(texels.len()) {
+            return Err(Error::InvalidDimensions {
+                source_name: source_name.to_string(),
+                detail: format!("{width}x{height} with {} texels", texels.len()),
+            });
+        }
+        let mut report = Sanitized::default();
+        for (index, texel) in texels.iter_mut().enumerate() {
+            let mut negative = false;
+            let mut non_finite = false;
+            for (c, value) in texel.iter_mut().enumerate() {
+                if !value.is_finite() {
+                    if !replace_non_finite {
+                        return Err(Error::NonFiniteTexel {
+                            source_name: source_name.to_string(),
+                            pos: TexelPos {
+                                x: index % width,
+                                y: index / width,
+                            },
+                            channel: ['R', 'G', 'B'][c],
+                            value: *value,
+                        });
+                    }
+                    non_finite = true;
+                } else if *value < 0.0 {
+                    negative = true;
+                    report.most_negative = report.most_negative.min(*value);
+                    *value = 0.0;
+                }
+            }
+            if non_finite {
+                *texel = [0.0; 3];
+                report.non_finite_texels += 1;
+            } else if negative {
+                report.negative_texels += 1;
+            }
+        }
+        Ok((
+            Self {
+                width,
+                height,
+                texels,
+            },
+            report,
+        ))
+    }
+
+    /// Width in texels (along u, φ).
+    #[inline]
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in texels (along v, θ).
+    #[inline]
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// All texels, row-major, row 0 at the top.
+    #[inline]
+    pub fn texels(&self) -> &[[f32; 3]] {
+        &self.texels
+    }
+
+    /// One row of texels (`y` from the top).
+    #[inline]
+    pub fn row(&self, y: usize) -> &[[f32; 3]] {
+        &self.texels[y * self.width..(y + 1) * self.width]
+    }
+
+    /// The texel at column `x`, row `y`. Panics when out of range (a programming error).
+    #[inline]
+    pub fn texel(&self, x: usize, y: usize) -> [f32; 3] {
+        self.texels[y * self.width + x]
+    }
+
+    /// Radiance at `(u, v)` with the given reconstruction.
+    #[inline]
+    pub fn lookup(&self, u: f32, v: f32, mode: Lookup) -> [f32; 3] {
+        match mode {
+            Lookup::Nearest => self.lookup_nearest(u, v),
+            Lookup::Bilinear => self.lookup_bilinear(u, v),
+        }
+    }
+
+    /// The texel containing `(u, v)`; u wraps, v clamps.
+    #[inline]
+    pub fn lookup_nearest(&self, u: f32, v: f32) -> [f32; 3] {
+        let x = wrap_index((u * self.width as f32).floor(), self.width);
+        let y = clamp_index((v * self.height as f32).floor(), self.height);
+        self.texel(x, y)
+    }
+
+    /// Bilinear interpolation between texel centres; u wraps, v clamps (so the top
+    /// and bottom half-rows are constant in v).
+    #[inline]
+    pub fn lookup_bilinear(&self, u: f32, v: f32) -> [f32; 3] {
+        let s = u * self.width as f32 - 0.5;
+        let t = v * self.height as f32 - 0.5;
+        let (s0, t0) = (s.floor(), t.floor());
+        let (fs, ft) = (s - s0, t - t0);
+        let x0 = wrap_index(s0, self.width);
+        let x1 = if x0 + 1 == self.width { 0 } else { x0 + 1 };
+        let y0 = clamp_index(t0, self.height);
+        let y1 = clamp_index(t0 + 1.0, self.height);
+        let (a, b) = (self.texel(x0, y0), self.texel(x1, y0));
+        let (c, d) = (self.texel(x0, y1), self.texel(x1, y1));
+        let mut out = [0.0f32; 3];
+        for k in 0..3 {
+            let top = a[k] + fs * (b[k] - a[k]);
+            let bottom = c[k] + fs * (d[k] - c[k]);
+            out[k] = (top + ft * (bottom - top)).max(0.0);
+        }
+        out
+    }
+}
+
+/// `floor(s)` wrapped into `[0, n)`; also safe for huge or NaN `s` (gives 0).
+#[inline]
+fn wrap_index(s: f32, n: usize) -> usize {
+    let i = s as i64; // saturating; NaN → 0
+    i.rem_euclid(n as i64) as usize
+}
+
+/// `floor(t)` clamped into `[0, n-1]`; NaN gives 0.
+#[inline]
+fn clamp_index(t: f32, n: usize) -> usize {
+    (t.max(0.0) as usize).min(n - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp() -> EnvImage {
+        EnvImage::from_fn(4, 2, |x, y| [x as f32, y as f32, 1.0]).unwrap()
+    }
+
+    #[test]
+    fn nearest_wraps_u_and_clamps_v() {
+        let img = ramp();
+        assert_eq!(img.lookup_nearest(0.1, 0.1), [0.0, 0.0, 1.0]);
+        assert_eq!(img.lookup_nearest(0.99, 0.99), [3.0, 1.0, 1.0]);
+        assert_eq!(img.lookup_nearest(1.1, 1.5), [0.0, 1.0, 1.0]);
+        assert_eq!(img.lookup_nearest(-0.1, -0.5), [3.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn bilinear_hits_texel_centres_and_wraps_the_seam() {
+        let img = ramp();
+        assert_eq!(img.lookup_bilinear(2.5 / 4.0, 0.25), [2.0, 0.0, 1.0]);
+        // Halfway between the last column (x = 3) and the first (x = 0) across the seam.
+        let seam = img.lookup_bilinear(0.0, 0.25);
+        assert!((seam[0] - 1.5).abs() < 1e-6, "{seam:?}");
+        // Top half-row is constant in v (clamp).
+        assert_eq!(img.lookup_bilinear(0.625, 0.0), [2.0, 0.0, 1.0]);
+        assert!((img.lookup_bilinear(0.625, 0.5)[1] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn raw_texels_are_validated() {
+        let bad = vec![[0.0, 1.0, 2.0], [0.0, f32::NAN, 0.0]];
+        match EnvImage::from_raw("f.pfm", 2, 1, bad.clone(), false) {
+            Err(Error::NonFiniteTexel { pos, channel, .. }) => {
+                assert_eq!((pos.x, pos.y, channel), (1, 0, 'G'))
+            }
+            other => panic!("{other:?}"),
+        }
+        let (img, report) = EnvImage::from_raw("f.pfm", 2, 1, bad, true).unwrap();
+        assert_eq!(report.non_finite_texels, 1);
+        assert_eq!(img.texel(1, 0), [0.0; 3]);
+        let (img, report) =
+            EnvImage::from_raw("f", 1, 2, vec![[-0.5, 1.0, -0.25], [1.0; 3]], false).unwrap();
+        assert_eq!((report.negative_texels, report.most_negative), (1, -0.5));
+        assert_eq!(img.texel(0, 0), [0.0, 1.0, 0.0]);
+        assert!(EnvImage::new(2, 2, vec![[0.0; 3]; 3]).is_err());
+        assert!(EnvImage::new(0, 2, vec![]).is_err());
+    }
+}

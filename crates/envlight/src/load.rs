@@ -1,0 +1,1 @@
+//! Decoding environment maps from files (being written).
