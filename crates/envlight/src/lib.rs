@@ -1,12 +1,47 @@
 //! envlight: image-based environment lighting with exact importance sampling.
+//!
+//! An environment light surrounds the scene at infinity; its radiance comes from an
+//! equirectangular HDR panorama. envlight builds a sampling distribution whose
+//! density follows the map's luminance, draws directions with their exact
+//! solid-angle pdf, and evaluates the pdf and radiance of any direction (for
+//! multiple importance sampling).
+//!
+//! Conventions (see DESIGN.md): right-handed, z up; image point `(u, v)` with u
+//! left→right and v top→bottom maps to `θ = π v` (from +z), `φ = 2π u` (from +x
+//! towards +y). Luminance `Y = 0.212671 R + 0.715160 G + 0.072169 B`.
+//!
+//! ```
+//! use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
+//!
+//! let light = EnvironmentLight::new(builtin::sky(256, 128), LightOptions::default()).unwrap();
+//! // Estimate the irradiance on an upward-facing surface, E = ∫ L cosθ dω.
+//! let n = 4096;
+//! let mut e = 0.0;
+//! for k in 0..n {
+//!     let xi = envlight::rng::xi_2d(7, k);
+//!     if let Some(s) = light.sample(xi) {
+//!         let cos = s.direction.dot(Vec3::new(0.0, 0.0, 1.0)).max(0.0);
+//!         e += envlight::color::luminance(s.radiance) * cos / s.pdf;
+//!     }
+//! }
+//! let e = e / n as f32;
+//! assert!(e > 0.0 && e.is_finite());
+//! ```
 #![warn(missing_docs)]
 
+pub mod builtin;
 pub mod color;
+pub mod distribution;
 pub mod error;
 pub mod image;
+pub mod light;
 pub mod load;
+pub mod mapping;
 pub mod math;
+pub mod rng;
 
+pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized};
+pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};

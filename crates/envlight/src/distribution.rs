@@ -1,0 +1,560 @@
+//! Piecewise-constant probability distributions on `[0, 1]` and `[0, 1]²`, sampled
+//! by inverting their cumulative distribution functions.
+//!
+//! A 1D distribution is built from `n` non-negative values `f[0..n)`, each constant
+//! over a cell of width `1/n`:
+//!
+//! ```text
+//! cdf[0] = 0,   cdf[i] = cdf[i-1] + f[i-1]/n,   integral = cdf[n],   cdf /= integral
+//! pdf(x) = f[⌊x n⌋] / integral
+//! ```
+//!
+//! Prefix sums are accumulated in `f64` and the normalised CDF is stored in `f32`
+//! with `cdf[n] == 1` exactly, so a row of 16 384 texels with a dynamic range of
+//! 10¹⁰ keeps every non-zero cell reachable. A function that is zero everywhere (or
+//! has no finite positive mass) gives a uniform CDF and a pdf of 0 everywhere; callers
+//! must read "pdf 0" as "no sample".
+//!
+//! The 2D distribution stores one conditional CDF per row in a single flat array (no
+//! per-row allocation) plus a marginal distribution over the rows' integrals.
+//! Memory: 1D, 8 bytes per cell; 2D, 8 bytes per cell plus 8 per row.
+
+/// The search that finds the CDF segment holding `xi`: the last index `o` with
+/// `cdf[o] <= xi`, clamped to `[0, n-1]` where `n = cdf.len() - 1`.
+///
+/// Zero-width segments (cells with `f = 0`) are skipped because a later entry with
+/// the same CDF value is preferred, so such cells are never returned for `xi < 1`.
+#[inline]
+fn find_segment(cdf: &[f32], xi: f32) -> usize {
+    let n = cdf.len() - 1;
+    // partition_point: first index whose cdf exceeds xi; the segment starts one before.
+    let first_above = cdf[1..n].partition_point(|&c| c <= xi);
+    first_above.min(n - 1)
+}
+
+/// Continuous sample of one CDF: returns `(segment, offset in segment)`.
+#[inline]
+fn sample_segment(cdf: &[f32], xi: f32) -> (usize, f32) {
+    let o = find_segment(cdf, xi);
+    let (lo, hi) = (cdf[o], cdf[o + 1]);
+    let width = hi - lo;
+    let du = if width > 0.0 {
+        ((xi - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
+    } else {
+        0.0
+    };
+    (o, du)
+}
+
+/// Inverse of [`sample_segment`] for a point `x ∈ [0, 1]` on a CDF with `n` cells.
+#[inline]
+fn invert_segment(cdf: &[f32], x: f32) -> f32 {
+    let n = cdf.len() - 1;
+    let scaled = (x * n as f32).clamp(0.0, n as f32);
+    let o = (scaled as usize).min(n - 1);
+    let frac = scaled - o as f32;
+    (cdf[o] + frac * (cdf[o + 1] - cdf[o])).clamp(0.0, 1.0)
+}
+
+/// The largest `f32` below 1: continuous samples stay in `[0, 1)`.
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Fills `cdf` (length `f.len() + 1`) with the normalised CDF of `f` and returns the
+/// integral `Σ f / n` (0 when there is no positive mass: then `cdf` is uniform).
+///
+/// Non-finite or negative values count as 0, so nothing downstream can see a NaN.
+fn build_cdf(f: &[f32], cdf: &mut [f32]) -> f64 {
+    let n = f.len();
+    debug_assert_eq!(cdf.len(), n + 1);
+    let mut sums = Vec::with_capacity(n + 1);
+    let mut running = 0.0f64;
+    sums.push(0.0);
+    for &value in f {
+        running += sanitize(value) as f64;
+        sums.push(running);
+    }
+    fill_normalised(&sums, cdf);
+    running / n as f64
+}
+
+/// Normalises prefix sums `sums` (with `sums[0] == 0`) into `cdf`, or writes the
+/// uniform CDF when the total is not positive.
+fn fill_normalised(sums: &[f64], cdf: &mut [f32]) {
+    let n = sums.len() - 1;
+    let total = sums[n];
+    if total > 0.0 && total.is_finite() {
+        let inv = 1.0 / total;
+        for (c, &s) in cdf.iter_mut().zip(sums) {
+            *c = (s * inv) as f32;
+        }
+    } else {
+        for (i, c) in cdf.iter_mut().enumerate() {
+            *c = (i as f64 / n as f64) as f32;
+        }
+    }
+    cdf[n] = 1.0;
+}
+
+/// A value usable as a density: finite and positive, otherwise 0.
+#[inline]
+fn sanitize(value: f32) -> f32 {
+    if value > 0.0 && value.is_finite() {
+        value
+    } else {
+        0.0
+    }
+}
+
+/// A piecewise-constant distribution on `[0, 1]` with `n` equal cells.
+///
+/// Guarantees: a cell with `f = 0` is never sampled; `pdf(sample_continuous(ξ).x)`
+/// equals the returned pdf; `invert(sample_continuous(ξ).x) ≈ ξ`. Sampling costs one
+/// binary search, `O(log n)`; memory is 8 bytes per cell.
+///
+/// ```
+/// use envlight::distribution::Distribution1D;
+/// let d = Distribution1D::new(&[1.0, 1.0, 2.0, 4.0, 8.0]);
+/// let s = d.sample_continuous(0.75);
+/// assert!((s.x - 0.9).abs() < 1e-6 && (s.pdf - 2.5).abs() < 1e-6);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct Distribution1D {
+    func: Vec<f32>,
+    cdf: Vec<f32>,
+    integral: f64,
+}
+
+/// A continuous sample of a 1D distribution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample1D {
+    /// The point in `[0, 1)`.
+    pub x: f32,
+    /// Its density `f[cell] / integral` (0 when the function is zero).
+    pub pdf: f32,
+    /// The cell that holds `x`.
+    pub cell: usize,
+}
+
+/// A discrete sample of a 1D distribution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiscreteSample {
+    /// The chosen cell.
+    pub index: usize,
+    /// Its probability `f[index] / Σ f` (0 when the function is zero).
+    pub probability: f32,
+    /// `ξ` rescaled to `[0, 1)` within the chosen cell, free for reuse.
+    pub remapped: f32,
+}
+
+impl Distribution1D {
+    /// Builds the distribution of `f`. Negative, NaN and infinite values count as 0.
+    ///
+    /// # Panics
+    /// When `f` is empty.
+    pub fn new(f: &[f32]) -> Self {
+        assert!(!f.is_empty(), "a distribution needs at least one cell");
+        let func: Vec<f32> = f.iter().map(|&v| sanitize(v)).collect();
+        let mut cdf = vec![0.0; f.len() + 1];
+        let integral = build_cdf(&func, &mut cdf);
+        Self {
+            func,
+            cdf,
+            integral,
+        }
+    }
+
+    /// Number of cells.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.func.len()
+    }
+
+    /// Always false: a distribution has at least one cell.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// `∫₀¹ f(x) dx = Σ f / n`.
+    #[inline]
+    pub fn integral(&self) -> f64 {
+        self.integral
+    }
+
+    /// The (sanitised) function values.
+    #[inline]
+    pub fn func(&self) -> &[f32] {
+        &self.func
+    }
+
+    /// The normalised CDF, `n + 1` entries from 0 to 1.
+    #[inline]
+    pub fn cdf(&self) -> &[f32] {
+        &self.cdf
+    }
+
+    /// Density at `x ∈ [0, 1]`: `f[⌊x n⌋] / integral`, or 0 for a zero function.
+    #[inline]
+    pub fn pdf(&self, x: f32) -> f32 {
+        let n = self.func.len();
+        let cell = ((x * n as f32).max(0.0) as usize).min(n - 1);
+        self.cell_pdf(cell)
+    }
+
+    #[inline]
+    fn cell_pdf(&self, cell: usize) -> f32 {
+        if self.integral > 0.0 {
+            (self.func[cell] as f64 / self.integral) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// Maps `ξ ∈ [0, 1)` to `x` distributed with density `pdf`: finds the CDF segment
+    /// `o` holding `ξ`, then places `x` linearly inside it,
+    /// `x = (o + (ξ - cdf[o]) / (cdf[o+1] - cdf[o])) / n`.
+    #[inline]
+    pub fn sample_continuous(&self, xi: f32) -> Sample1D {
+        let (cell, du) = sample_segment(&self.cdf, xi);
+        let n = self.func.len() as f32;
+        Sample1D {
+            x: ((cell as f32 + du) / n).min(ONE_MINUS_EPSILON),
+            pdf: self.cell_pdf(cell),
+            cell,
+        }
+    }
+
+    /// Picks cell `i` with probability `f[i] / Σ f`.
+    #[inline]
+    pub fn sample_discrete(&self, xi: f32) -> DiscreteSample {
+        let (index, remapped) = sample_segment(&self.cdf, xi);
+        let n = self.func.len() as f64;
+        let probability = if self.integral > 0.0 {
+            (self.func[index] as f64 / (self.integral * n)) as f32
+        } else {
+            0.0
+        };
+        DiscreteSample {
+            index,
+            probability,
+            remapped,
+        }
+    }
+
+    /// Probability of picking cell `index` in [`Self::sample_discrete`].
+    #[inline]
+    pub fn discrete_probability(&self, index: usize) -> f32 {
+        self.cell_pdf(index) / self.func.len() as f32
+    }
+
+    /// The sample-space point that [`Self::sample_continuous`] maps to `x`:
+    /// `ξ = cdf[o] + (x n - o)(cdf[o+1] - cdf[o])` with `o = ⌊x n⌋`.
+    #[inline]
+    pub fn invert(&self, x: f32) -> f32 {
+        invert_segment(&self.cdf, x)
+    }
+}
+
+/// A piecewise-constant distribution on `[0, 1]²` over an `nu × nv` grid, sampled
+/// as a marginal over rows (v) and a conditional within the chosen row (u):
+/// `p(u, v) = p(v) p(u | v) = f[v][u] / I`, `I = Σ f / (nu nv)`.
+///
+/// Memory: 8 bytes per cell (the function and one CDF entry) plus 8 per row.
+/// Sampling: two binary searches, `O(log nu + log nv)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Distribution2D {
+    nu: usize,
+    nv: usize,
+    /// `f[v * nu + u]`, sanitised.
+    func: Vec<f32>,
+    /// Row `v`'s normalised conditional CDF at `[v * (nu + 1) .. (v + 1) * (nu + 1)]`.
+    conditional_cdf: Vec<f32>,
+    /// Each row's integral `Σ_u f[v][u] / nu`.
+    row_integral: Vec<f64>,
+    marginal: Distribution1D,
+}
+
+/// A continuous sample of a 2D distribution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample2D {
+    /// The point `[u, v]` in `[0, 1)²`.
+    pub uv: [f32; 2],
+    /// Its density with respect to area in `[0, 1]²` (0 for a zero function).
+    pub pdf: f32,
+    /// The cell `[iu, iv]` holding the point.
+    pub cell: [usize; 2],
+}
+
+impl Distribution2D {
+    /// Builds the distribution of `f`, given row-major with `nu` values per row.
+    /// Rows are built in parallel. Negative, NaN and infinite values count as 0.
+    ///
+    /// # Panics
+    /// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
+    pub fn new(f: &[f32], nu: usize) -> Self {
+        assert!(
+            nu > 0 && !f.is_empty() && f.len() % nu == 0,
+            "bad 2D grid shape"
+        );
+        Self::from_rows(nu, f.len() / nu, |v, row| {
+            for (dst, &src) in row.iter_mut().zip(&f[v * nu..(v + 1) * nu]) {
+                *dst = sanitize(src);
+            }
+        })
+    }
+
+    /// Builds the distribution from a function that fills row `v` (`nu` values) in
+    /// place; rows are filled and summed in parallel, in one pass over memory.
+    /// Values that are not finite and positive are stored as 0.
+    ///
+    /// # Panics
+    /// When `nu == 0` or `nv == 0`.
+    pub fn from_rows(nu: usize, nv: usize, fill_row: impl Fn(usize, &mut [f32]) + Sync) -> Self {
+        use rayon::prelude::*;
+        assert!(nu > 0 && nv > 0, "bad 2D grid shape");
+        let mut func = vec![0.0f32; nu * nv];
+        let mut conditional_cdf = vec![0.0f32; (nu + 1) * nv];
+        let mut row_integral = vec![0.0f64; nv];
+        // Big rows alone are worth a task; tiny ones are grouped so scheduling
+        // does not dominate.
+        let rows_per_task = (4096 / nu).max(1);
+        func.par_chunks_mut(nu * rows_per_task)
+            .zip(conditional_cdf.par_chunks_mut((nu + 1) * rows_per_task))
+            .zip(row_integral.par_chunks_mut(rows_per_task))
+            .enumerate()
+            .for_each(|(task, ((funcs, cdfs), integrals))| {
+                let mut sums = Vec::with_capacity(nu + 1);
+                for (k, ((row, cdf), integral)) in funcs
+                    .chunks_mut(nu)
+                    .zip(cdfs.chunks_mut(nu + 1))
+                    .zip(integrals.iter_mut())
+                    .enumerate()
+                {
+                    fill_row(task * rows_per_task + k, row);
+                    sums.clear();
+                    sums.push(0.0f64);
+                    let mut running = 0.0f64;
+                    for value in row.iter_mut() {
+                        *value = sanitize(*value);
+                        running += *value as f64;
+                        sums.push(running);
+                    }
+                    fill_normalised(&sums, cdf);
+                    *integral = running / nu as f64;
+                }
+            });
+        let marginal_func: Vec<f32> = row_integral.iter().map(|&i| i as f32).collect();
+        let mut marginal = Distribution1D::new(&marginal_func);
+        // The marginal's integral is the 2D integral; keep it in full precision
+        // (the f32 row integrals only shape the marginal CDF).
+        marginal.integral = row_integral.iter().sum::<f64>() / nv as f64;
+        Self {
+            nu,
+            nv,
+            func,
+            conditional_cdf,
+            row_integral,
+            marginal,
+        }
+    }
+
+    /// Grid width (cells along u).
+    #[inline]
+    pub fn nu(&self) -> usize {
+        self.nu
+    }
+
+    /// Grid height (cells along v).
+    #[inline]
+    pub fn nv(&self) -> usize {
+        self.nv
+    }
+
+    /// `I = ∫∫ f du dv = Σ f / (nu nv)`.
+    #[inline]
+    pub fn integral(&self) -> f64 {
+        self.marginal.integral
+    }
+
+    /// The (sanitised) function, row-major.
+    #[inline]
+    pub fn func(&self) -> &[f32] {
+        &self.func
+    }
+
+    /// The marginal distribution over rows.
+    #[inline]
+    pub fn marginal(&self) -> &Distribution1D {
+        &self.marginal
+    }
+
+    /// Integral of row `v`, `Σ_u f[v][u] / nu`.
+    #[inline]
+    pub fn row_integral(&self, v: usize) -> f64 {
+        self.row_integral[v]
+    }
+
+    /// Bytes of sampling data held (function, CDFs and row integrals).
+    pub fn memory_bytes(&self) -> usize {
+        4 * (self.func.len() + self.conditional_cdf.len() + self.marginal.func.len())
+            + 4 * self.marginal.cdf.len()
+            + 8 * self.row_integral.len()
+    }
+
+    #[inline]
+    fn row_cdf(&self, v: usize) -> &[f32] {
+        &self.conditional_cdf[v * (self.nu + 1)..(v + 1) * (self.nu + 1)]
+    }
+
+    /// Density of cell `[iu, iv]`: `f[iv][iu] / I`, 0 for a zero function.
+    #[inline]
+    pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
+        let integral = self.marginal.integral;
+        if integral > 0.0 {
+            (self.func[iv * self.nu + iu] as f64 / integral) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
+    #[inline]
+    pub fn pdf(&self, uv: [f32; 2]) -> f32 {
+        let iu = ((uv[0] * self.nu as f32).max(0.0) as usize).min(self.nu - 1);
+        let iv = ((uv[1] * self.nv as f32).max(0.0) as usize).min(self.nv - 1);
+        self.cell_pdf(iu, iv)
+    }
+
+    /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`
+    /// picks the row from the marginal, `ξ0` the position within that row.
+    #[inline]
+    pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
+        let (iv, dv) = sample_segment(&self.marginal.cdf, xi[1]);
+        let (iu, du) = sample_segment(self.row_cdf(iv), xi[0]);
+        Sample2D {
+            uv: [
+                ((iu as f32 + du) / self.nu as f32).min(ONE_MINUS_EPSILON),
+                ((iv as f32 + dv) / self.nv as f32).min(ONE_MINUS_EPSILON),
+            ],
+            pdf: self.cell_pdf(iu, iv),
+            cell: [iu, iv],
+        }
+    }
+
+    /// The sample-space point that [`Self::sample_continuous`] maps to `uv`.
+    #[inline]
+    pub fn invert(&self, uv: [f32; 2]) -> [f32; 2] {
+        let xi1 = invert_segment(&self.marginal.cdf, uv[1]);
+        let iv = ((uv[1] * self.nv as f32).max(0.0) as usize).min(self.nv - 1);
+        let xi0 = invert_segment(self.row_cdf(iv), uv[0]);
+        [xi0, xi1]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f32, b: f32) -> bool {
+        (a - b).abs() <= 1e-6 * (1.0 + b.abs())
+    }
+
+    #[test]
+    fn continuous_sampling_matches_hand_computed_cdf() {
+        // f = {1,1,2,4,8}: integral 16/5, cdf = {0, 1/16, 2/16, 4/16, 8/16, 1}.
+        let d = Distribution1D::new(&[1.0, 1.0, 2.0, 4.0, 8.0]);
+        assert!((d.integral() - 3.2).abs() < 1e-12);
+        let s = d.sample_continuous(0.0);
+        assert!(close(s.x, 0.0) && close(s.pdf, 5.0 / 16.0), "{s:?}");
+        let s = d.sample_continuous(0.5);
+        assert!(close(s.x, 0.8) && close(s.pdf, 2.5), "{s:?}");
+        let s = d.sample_continuous(0.75);
+        assert!(close(s.x, 0.9) && close(s.pdf, 2.5), "{s:?}");
+        let s = d.sample_continuous(ONE_MINUS_EPSILON);
+        assert!(close(s.x, 1.0) && s.x < 1.0, "{s:?}");
+        // ξ = 1 is outside the contract but must still land in range.
+        assert!(d.sample_continuous(1.0).x < 1.0);
+    }
+
+    #[test]
+    fn invert_matches_hand_computed_cdf() {
+        // f = {0, .25, .5, .25}: cdf = {0, 0, .25, .75, 1}.
+        let d = Distribution1D::new(&[0.0, 0.25, 0.5, 0.25]);
+        assert!(close(d.invert(0.5), 0.25));
+        assert!(close(d.invert(0.625), 0.5));
+        assert!(close(d.invert(0.75), 0.75));
+        assert_eq!(d.invert(0.0), 0.0);
+        assert_eq!(d.invert(1.0), 1.0);
+    }
+
+    #[test]
+    fn zero_cells_are_never_sampled() {
+        let d = Distribution1D::new(&[0.0, 0.0, 3.0, 0.0, 1.0, 0.0]);
+        for k in 0..=1000 {
+            let xi = (k as f32 / 1000.0).min(ONE_MINUS_EPSILON);
+            let s = d.sample_continuous(xi);
+            assert!(s.cell == 2 || s.cell == 4, "ξ={xi} gave {s:?}");
+            assert!(s.pdf > 0.0);
+            assert_eq!(d.sample_discrete(xi).index, s.cell);
+        }
+    }
+
+    #[test]
+    fn zero_function_is_uniform_with_zero_pdf() {
+        let d = Distribution1D::new(&[0.0, f32::NAN, -1.0, 0.0]);
+        assert_eq!(d.integral(), 0.0);
+        assert_eq!(d.cdf(), &[0.0, 0.25, 0.5, 0.75, 1.0]);
+        let s = d.sample_continuous(0.6);
+        assert_eq!((s.pdf, s.cell), (0.0, 2));
+        assert!(close(s.x, 0.6));
+        assert_eq!(d.sample_discrete(0.6).probability, 0.0);
+        assert_eq!(d.pdf(0.3), 0.0);
+    }
+
+    #[test]
+    fn discrete_sampling_reports_probability_and_remaps() {
+        let d = Distribution1D::new(&[1.0, 3.0]);
+        let s = d.sample_discrete(0.5);
+        assert_eq!(s.index, 1);
+        assert!(close(s.probability, 0.75));
+        assert!(close(s.remapped, 1.0 / 3.0));
+        assert!(close(d.discrete_probability(0), 0.25));
+    }
+
+    #[test]
+    fn f64_accumulation_keeps_the_last_cell_of_a_long_row() {
+        // 2^24 + 1 cells of 1: summed in f32, the running total stops at 2^24 and
+        // the last cell would get zero width.
+        let n = (1 << 24) + 1;
+        let d = Distribution1D::new(&vec![1.0; n]);
+        let cdf = d.cdf();
+        assert!(cdf[n - 1] < 1.0 && cdf[n] == 1.0);
+        assert!(close(d.integral() as f32, 1.0));
+    }
+
+    #[test]
+    fn two_dimensional_sampling_and_pdf_agree() {
+        // 3×2 grid: rows {1,0,1} and {0,4,0}; I = 6/6 = 1.
+        let d = Distribution2D::new(&[1.0, 0.0, 1.0, 0.0, 4.0, 0.0], 3);
+        assert!((d.integral() - 1.0).abs() < 1e-12);
+        // Row 1 carries 4/6 of the mass: ξ1 ≥ 1/3 picks it.
+        let s = d.sample_continuous([0.5, 0.5]);
+        assert_eq!(s.cell, [1, 1]);
+        assert!(close(s.pdf, 4.0) && close(d.pdf(s.uv), 4.0));
+        // Row 1 spans ξ1 ∈ [1/3, 1): ξ1 = .5 is a quarter of the way down it.
+        assert!(close(s.uv[0], 0.5) && close(s.uv[1], 0.625), "{s:?}");
+        let s = d.sample_continuous([0.75, 0.1]);
+        assert_eq!(s.cell, [2, 0]);
+        let back = d.invert(s.uv);
+        assert!(close(back[0], 0.75) && close(back[1], 0.1), "{back:?}");
+        assert_eq!(d.pdf([0.5, 0.25]), 0.0);
+    }
+
+    #[test]
+    fn two_dimensional_zero_function_has_zero_pdf() {
+        let d = Distribution2D::new(&[0.0; 8], 4);
+        let s = d.sample_continuous([0.3, 0.7]);
+        assert_eq!(s.pdf, 0.0);
+        assert!(s.uv[0].is_finite() && s.uv[1].is_finite());
+    }
+}

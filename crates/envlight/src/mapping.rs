@@ -1,0 +1,73 @@
+//! The equirectangular (latitude-longitude) mapping between image coordinates and
+//! directions, z up:
+//!
+//! ```text
+//! θ = π v,  φ = 2π u,  ω = (sin θ cos φ, sin θ sin φ, cos θ)
+//! dω = sin θ dθ dφ = 2π² sin θ du dv
+//! ```
+//!
+//! So the top row looks at +z, `u = 0` at +x and `u = 0.25` at +y.
+
+use crate::distribution::ONE_MINUS_EPSILON;
+use crate::math::Vec3;
+use std::f32::consts::PI;
+
+/// `dω / (du dv) = 2π² sin θ`: this constant times `sin θ`.
+pub const EQUIRECT_JACOBIAN: f32 = 2.0 * PI * PI;
+
+/// The unit direction at image point `(u, v)`, and `sin θ` at it.
+#[inline]
+pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
+    let (sin_theta, cos_theta) = (PI * v).sin_cos();
+    let (sin_phi, cos_phi) = (2.0 * PI * u).sin_cos();
+    let sin_theta = sin_theta.max(0.0);
+    (
+        Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta),
+        sin_theta,
+    )
+}
+
+/// The image point `[u, v] ∈ [0, 1)×[0, 1]` looking along the unit direction `d`:
+/// `θ = acos(clamp(z))`, `φ = atan2(y, x)` wrapped to `[0, 2π)`.
+#[inline]
+pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
+    let theta = d.z.clamp(-1.0, 1.0).acos();
+    let mut phi = d.y.atan2(d.x);
+    if phi < 0.0 {
+        phi += 2.0 * PI;
+    }
+    let u = (phi * (0.5 / PI)).min(ONE_MINUS_EPSILON);
+    [u, theta * (1.0 / PI)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conventions_hold() {
+        let (d, s) = equirect_to_direction(0.0, 0.0);
+        assert!((d.z - 1.0).abs() < 1e-6 && s.abs() < 1e-6);
+        let (d, _) = equirect_to_direction(0.0, 0.5);
+        assert!((d.x - 1.0).abs() < 1e-6);
+        let (d, _) = equirect_to_direction(0.25, 0.5);
+        assert!((d.y - 1.0).abs() < 1e-6);
+        let (d, _) = equirect_to_direction(0.7, 1.0);
+        assert!((d.z + 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn round_trip() {
+        for i in 0..64 {
+            for j in 1..32 {
+                let (u, v) = ((i as f32 + 0.37) / 64.0, (j as f32 + 0.11) / 33.0);
+                let (d, _) = equirect_to_direction(u, v);
+                let [u2, v2] = direction_to_equirect(d);
+                assert!((u - u2).abs() < 2e-6 && (v - v2).abs() < 2e-6, "{u},{v} -> {u2},{v2}");
+            }
+        }
+        // Just below the seam stays just below 1, never reaches 1.
+        let [u, _] = direction_to_equirect(Vec3::new(1.0, -1e-9, 0.0));
+        assert!(u < 1.0);
+    }
+}
