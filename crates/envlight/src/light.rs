@@ -211,6 +211,32 @@ impl EnvironmentLight {
         self.to_world(equirect_to_direction(uv[0], uv[1]).0)
     }
 
+    /// [`Self::sample`] for every `ξ` in `xi`, written to `out` in order, in parallel.
+    /// Each result depends only on its own `ξ`, so the output is the same for any
+    /// thread count.
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
+        batch(xi, out, |&x| self.sample(x));
+    }
+
+    /// [`Self::pdf`] for every direction in `directions`, in parallel.
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
+        batch(directions, out, |&d| self.pdf(d));
+    }
+
+    /// [`Self::radiance`] for every direction in `directions`, in parallel.
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
+        batch(directions, out, |&d| self.radiance(d));
+    }
+
     /// The sample-space point `ξ` that [`Self::sample`] maps to `direction`
     /// (the exact inverse of sampling, up to float rounding).
     #[inline]
@@ -317,6 +343,20 @@ impl EnvironmentLight {
             })
             .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
+}
+
+/// Applies `f` element-wise from `input` to `out` in parallel chunks large enough
+/// that scheduling costs little next to the work.
+fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Sync) {
+    assert_eq!(input.len(), out.len(), "batch input and output lengths differ");
+    const CHUNK: usize = 4096;
+    out.par_chunks_mut(CHUNK)
+        .zip(input.par_chunks(CHUNK))
+        .for_each(|(o, i)| {
+            for (dst, src) in o.iter_mut().zip(i) {
+                *dst = f(src);
+            }
+        });
 }
 
 /// The importance distribution of DESIGN.md §4 step 1.

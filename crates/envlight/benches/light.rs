@@ -1,0 +1,138 @@
+//! Benchmarks for building and querying the environment light, each next to the
+//! plain seed implementation in `baseline/` measured in the same run, so figures can
+//! be read as ratios on a noisy machine.
+//!
+//! Run: `cargo bench -p envlight --bench light` (all), or filter, e.g.
+//! `cargo bench -p envlight --bench light -- sample`.
+
+mod baseline;
+
+use baseline::BaselineLight;
+use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
+use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Lookup, Vec3};
+use std::hint::black_box;
+use std::sync::OnceLock;
+
+/// Maps used by the benches: the built-in sky at 1k, 4k and 8k width (generated
+/// once; the 8k map is 400 MB of texels).
+fn sky(width: usize) -> &'static EnvImage {
+    static MAPS: [OnceLock<EnvImage>; 3] = [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+    let slot = match width {
+        1024 => &MAPS[0],
+        4096 => &MAPS[1],
+        _ => &MAPS[2],
+    };
+    slot.get_or_init(|| builtin::sky(width, width / 2))
+}
+
+fn light(width: usize, lookup: Lookup) -> EnvironmentLight {
+    let options = LightOptions {
+        lookup,
+        ..Default::default()
+    };
+    EnvironmentLight::new(sky(width).clone(), options).unwrap()
+}
+
+const QUERIES: usize = 4096;
+
+fn random_xi() -> Vec<[f32; 2]> {
+    (0..QUERIES as u64).map(|k| envlight::rng::xi_2d(99, k)).collect()
+}
+
+fn random_directions() -> Vec<Vec3> {
+    random_xi()
+        .into_iter()
+        .map(|[a, b]| {
+            let z = 1.0 - 2.0 * a;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = 2.0 * std::f32::consts::PI * b;
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+fn bench_build(c: &mut Criterion) {
+    let mut group = c.benchmark_group("build");
+    group.sample_size(10);
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    for width in [1024usize, 4096, 8192] {
+        let image = sky(width);
+        group.throughput(Throughput::Elements((width * width / 2) as u64));
+        group.bench_with_input(BenchmarkId::new("baseline", width), image, |b, img| {
+            b.iter_batched(|| img.clone(), BaselineLight::new, BatchSize::PerIteration)
+        });
+        group.bench_with_input(BenchmarkId::new("envlight", width), image, |b, img| {
+            b.iter_batched(
+                || img.clone(),
+                |img| EnvironmentLight::new(img, LightOptions::default()).unwrap(),
+                BatchSize::PerIteration,
+            )
+        });
+        group.bench_with_input(BenchmarkId::new("envlight-1thread", width), image, |b, img| {
+            b.iter_batched(
+                || img.clone(),
+                |img| {
+                    one_thread.install(|| EnvironmentLight::new(img, LightOptions::default()).unwrap())
+                },
+                BatchSize::PerIteration,
+            )
+        });
+    }
+    group.finish();
+}
+
+fn bench_queries(c: &mut Criterion) {
+    let xi = random_xi();
+    let dirs = random_directions();
+    let width = 4096;
+    let base = BaselineLight::new(sky(width).clone());
+    let lights = [
+        ("envlight-bilinear", light(width, Lookup::Bilinear)),
+        ("envlight-nearest", light(width, Lookup::Nearest)),
+    ];
+
+    let mut group = c.benchmark_group("sample");
+    group.throughput(Throughput::Elements(QUERIES as u64));
+    group.bench_function("baseline", |b| {
+        b.iter(|| xi.iter().map(|&x| base.sample(black_box(x)).map_or(0.0, |s| s.1)).sum::<f32>())
+    });
+    for (name, l) in &lights {
+        group.bench_function(*name, |b| {
+            b.iter(|| xi.iter().map(|&x| l.sample(black_box(x)).map_or(0.0, |s| s.pdf)).sum::<f32>())
+        });
+    }
+    let mut out = vec![None; QUERIES * 64];
+    let many: Vec<[f32; 2]> = (0..out.len() as u64).map(|k| envlight::rng::xi_2d(5, k)).collect();
+    group.throughput(Throughput::Elements(out.len() as u64));
+    group.bench_function("envlight-batch-all-threads", |b| {
+        b.iter(|| lights[0].1.sample_batch(black_box(&many), &mut out))
+    });
+    group.finish();
+
+    let mut group = c.benchmark_group("pdf");
+    group.throughput(Throughput::Elements(QUERIES as u64));
+    group.bench_function("baseline", |b| {
+        b.iter(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum::<f32>())
+    });
+    for (name, l) in &lights {
+        group.bench_function(*name, |b| {
+            b.iter(|| dirs.iter().map(|&d| l.pdf(black_box(d))).sum::<f32>())
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("radiance");
+    group.throughput(Throughput::Elements(QUERIES as u64));
+    group.bench_function("baseline", |b| {
+        b.iter(|| dirs.iter().map(|&d| base.radiance(black_box(d))[1]).sum::<f32>())
+    });
+    for (name, l) in &lights {
+        group.bench_function(*name, |b| {
+            b.iter(|| dirs.iter().map(|&d| l.radiance(black_box(d))[1]).sum::<f32>())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_build, bench_queries);
+criterion_main!(benches);
