@@ -341,7 +341,10 @@ impl EnvironmentLight {
                 let cell = 1.0 / (16.0 * w as f64 * h as f64);
                 (ey * cell, ey2p * cell)
             })
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+            .collect::<Vec<_>>()
+            .into_iter()
+            // Summed in row order so the result does not depend on the thread count.
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 }
 
@@ -414,7 +417,10 @@ fn integrate_radiance(image: &EnvImage, lookup: Lookup) -> [f64; 3] {
             }
             sum.map(|s| s / w * weights[j])
         })
-        .reduce(|| [0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
+        .collect::<Vec<_>>()
+        .into_iter()
+        // Summed in row order so the result does not depend on the thread count.
+        .fold([0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
 }
 
 /// Solid angle `W_j` attributed to each row by `lookup` (they sum to 4π).

@@ -1,0 +1,87 @@
+//! Thread guarantees: the light is `Send + Sync`, and the same ξ gives bit-identical
+//! results whichever thread (or how many threads) evaluates it.
+
+use envlight::{builtin, EnvironmentLight, LightOptions, LightSample, Lookup, Rotation, Vec3};
+
+fn assert_send_sync<T: Send + Sync>() {}
+
+#[test]
+fn light_and_its_parts_are_send_and_sync() {
+    assert_send_sync::<EnvironmentLight>();
+    assert_send_sync::<envlight::Distribution2D>();
+    assert_send_sync::<envlight::EnvImage>();
+    assert_send_sync::<envlight::Error>();
+}
+
+fn bits(s: &Option<LightSample>) -> Vec<u32> {
+    match s {
+        None => vec![],
+        Some(s) => [s.direction.x, s.direction.y, s.direction.z, s.pdf]
+            .iter()
+            .chain(&s.radiance)
+            .chain(&s.uv)
+            .map(|v| v.to_bits())
+            .collect(),
+    }
+}
+
+#[test]
+fn many_threads_give_bit_identical_results_to_one() {
+    let options = LightOptions {
+        rotation: Rotation::about_z_degrees(33.0),
+        lookup: Lookup::Bilinear,
+        ..Default::default()
+    };
+    let light = EnvironmentLight::new(builtin::sky(256, 128), options).unwrap();
+    let n = 50_000u64;
+    let xi: Vec<[f32; 2]> = (0..n).map(|k| envlight::rng::xi_2d(11, k)).collect();
+    let serial: Vec<Option<LightSample>> = xi.iter().map(|&x| light.sample(x)).collect();
+
+    // Eight threads, each over an interleaved subset.
+    let threads = 8usize;
+    let parallel: Vec<Vec<(usize, Option<LightSample>)>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let (light, xi) = (&light, &xi);
+                scope.spawn(move || {
+                    (t..xi.len())
+                        .step_by(threads)
+                        .map(|k| (k, light.sample(xi[k])))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (k, s) in parallel.into_iter().flatten() {
+        assert_eq!(bits(&s), bits(&serial[k]), "sample {k} differs between threads");
+    }
+
+    // The batch API on a rayon pool of any size equals the serial loop.
+    for pool_threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(pool_threads).build().unwrap();
+        let mut out = vec![None; xi.len()];
+        pool.install(|| light.sample_batch(&xi, &mut out));
+        for (k, (a, b)) in out.iter().zip(&serial).enumerate() {
+            assert_eq!(bits(a), bits(b), "batch sample {k} differs ({pool_threads} threads)");
+        }
+        let dirs: Vec<Vec3> = serial.iter().flatten().map(|s| s.direction).collect();
+        let mut pdfs = vec![0.0; dirs.len()];
+        pool.install(|| light.pdf_batch(&dirs, &mut pdfs));
+        for (d, p) in dirs.iter().zip(&pdfs) {
+            assert_eq!(p.to_bits(), light.pdf(*d).to_bits());
+        }
+    }
+}
+
+#[test]
+fn building_is_independent_of_thread_count() {
+    let image = builtin::sky(300, 150);
+    let build = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| EnvironmentLight::new(image.clone(), LightOptions::default()).unwrap())
+    };
+    let (a, b) = (build(1), build(4));
+    assert_eq!(a.distribution(), b.distribution());
+    assert_eq!(a.integral_rgb(), b.integral_rgb());
+}
