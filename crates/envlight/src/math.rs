@@ -131,7 +131,9 @@ impl Rotation {
         for i in 0..3 {
             for j in 0..3 {
                 let want = if i == j { 1.0 } else { 0.0 };
-                if !((rows[i].dot(rows[j]) - want).abs() < 1e-4) {
+                let error = (rows[i].dot(rows[j]) - want).abs();
+                // Written so that a NaN entry is rejected too.
+                if error.is_nan() || error >= 1e-4 {
                     return None;
                 }
             }
