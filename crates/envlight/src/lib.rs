@@ -45,3 +45,8 @@ pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
+
+/// The README's Rust example, compiled and run as a doctest so the README stays true.
+#[doc = include_str!("../../../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
