@@ -16,6 +16,16 @@ pub enum Lookup {
     Bilinear,
 }
 
+/// What happens to u outside `[0, 1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum WrapU {
+    /// u is periodic (an equirectangular map's seam).
+    #[default]
+    Periodic,
+    /// u is clamped like v (an equal-area square's edges).
+    Clamp,
+}
+
 /// A linear-RGB environment image. Every texel is finite and non-negative (the
 /// constructors guarantee it), so no NaN can come out of a lookup.
 #[derive(Debug, Clone, PartialEq)]
@@ -164,33 +174,62 @@ impl EnvImage {
         self.texels[y * self.width + x]
     }
 
-    /// Radiance at `(u, v)` with the given reconstruction.
+    /// Radiance at `(u, v)` with the given reconstruction; u wraps, v clamps.
     #[inline]
     pub fn lookup(&self, u: f32, v: f32, mode: Lookup) -> [f32; 3] {
+        self.lookup_wrapped(u, v, mode, WrapU::Periodic)
+    }
+
+    /// Radiance at `(u, v)` with the given reconstruction and treatment of u; v
+    /// always clamps.
+    #[inline]
+    pub fn lookup_wrapped(&self, u: f32, v: f32, mode: Lookup, wrap: WrapU) -> [f32; 3] {
         match mode {
-            Lookup::Nearest => self.lookup_nearest(u, v),
-            Lookup::Bilinear => self.lookup_bilinear(u, v),
+            Lookup::Nearest => self.nearest(u, v, wrap),
+            Lookup::Bilinear => self.bilinear(u, v, wrap),
         }
     }
 
     /// The texel containing `(u, v)`; u wraps, v clamps.
     #[inline]
     pub fn lookup_nearest(&self, u: f32, v: f32) -> [f32; 3] {
-        let x = wrap_index((u * self.width as f32).floor(), self.width);
-        let y = clamp_index((v * self.height as f32).floor(), self.height);
-        self.texel(x, y)
+        self.nearest(u, v, WrapU::Periodic)
     }
 
     /// Bilinear interpolation between texel centres; u wraps, v clamps (so the top
     /// and bottom half-rows are constant in v).
     #[inline]
     pub fn lookup_bilinear(&self, u: f32, v: f32) -> [f32; 3] {
+        self.bilinear(u, v, WrapU::Periodic)
+    }
+
+    #[inline]
+    fn column(&self, s: f32, wrap: WrapU) -> usize {
+        match wrap {
+            WrapU::Periodic => wrap_index(s, self.width),
+            WrapU::Clamp => clamp_index(s, self.width),
+        }
+    }
+
+    #[inline]
+    fn nearest(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
+        let x = self.column((u * self.width as f32).floor(), wrap);
+        let y = clamp_index((v * self.height as f32).floor(), self.height);
+        self.texel(x, y)
+    }
+
+    #[inline]
+    fn bilinear(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
         let s = u * self.width as f32 - 0.5;
         let t = v * self.height as f32 - 0.5;
         let (s0, t0) = (s.floor(), t.floor());
         let (fs, ft) = (s - s0, t - t0);
-        let x0 = wrap_index(s0, self.width);
-        let x1 = if x0 + 1 == self.width { 0 } else { x0 + 1 };
+        let x0 = self.column(s0, wrap);
+        let x1 = match wrap {
+            WrapU::Periodic if x0 + 1 == self.width => 0,
+            WrapU::Periodic => x0 + 1,
+            WrapU::Clamp => self.column(s0 + 1.0, wrap),
+        };
         let y0 = clamp_index(t0, self.height);
         let y1 = clamp_index(t0 + 1.0, self.height);
         let (a, b) = (self.texel(x0, y0), self.texel(x1, y0));
@@ -245,6 +284,16 @@ mod tests {
         // Top half-row is constant in v (clamp).
         assert_eq!(img.lookup_bilinear(0.625, 0.0), [2.0, 0.0, 1.0]);
         assert!((img.lookup_bilinear(0.625, 0.5)[1] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn clamped_u_holds_the_edge_columns() {
+        let img = ramp();
+        let mode = Lookup::Bilinear;
+        assert_eq!(img.lookup_wrapped(0.0, 0.25, mode, WrapU::Clamp)[0], 0.0);
+        assert_eq!(img.lookup_wrapped(0.999, 0.25, mode, WrapU::Clamp)[0], 3.0);
+        assert_eq!(img.lookup_wrapped(1.2, 0.25, Lookup::Nearest, WrapU::Clamp)[0], 3.0);
+        assert!((img.lookup_wrapped(0.5, 0.25, mode, WrapU::Clamp)[0] - 1.5).abs() < 1e-6);
     }
 
     #[test]

@@ -42,7 +42,7 @@ pub mod rng;
 
 pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};
-pub use image::{EnvImage, Lookup, Sanitized};
+pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
 
