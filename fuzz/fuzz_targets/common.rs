@@ -1,5 +1,7 @@
-// Shared by the loader targets (included with `include!`): decode `bytes` under a
+// Shared by the loader targets and crates/envlight/tests/fuzz_regressions.rs
+// (included with `include!`): decode `bytes` under a
 // small texel limit and check what a successful load promises.
+#[allow(dead_code)]
 fn check_load(prefix: &[u8], data: &[u8]) {
     let mut bytes = Vec::with_capacity(prefix.len() + data.len());
     bytes.extend_from_slice(prefix);

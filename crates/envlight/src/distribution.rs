@@ -50,10 +50,34 @@ fn sample_segment(cdf: &[f32], xi: f32) -> (usize, f32) {
 #[inline]
 fn invert_segment(cdf: &[f32], x: f32) -> f32 {
     let n = cdf.len() - 1;
-    let scaled = (x * n as f32).clamp(0.0, n as f32);
-    let o = (scaled as usize).min(n - 1);
-    let frac = scaled - o as f32;
+    let o = cell_index(x, n);
+    let frac = (x * n as f32 - o as f32).clamp(0.0, 1.0);
     (cdf[o] + frac * (cdf[o + 1] - cdf[o])).clamp(0.0, 1.0)
+}
+
+/// The cell of `x ∈ [0, 1]` on a grid of `n` cells, `⌊x n⌋` clamped to `[0, n-1]`.
+/// Every lookup (pdf, invert) and every sample placement goes through this one
+/// function, so they agree about which cell a point is in.
+#[inline]
+pub(crate) fn cell_index(x: f32, n: usize) -> usize {
+    ((x * n as f32).max(0.0) as usize).min(n - 1)
+}
+
+/// The point `(cell + frac) / n`, nudged by an ulp or two where f32 rounding would
+/// put it on a neighbouring cell (e.g. `frac` just below 1 rounds `cell + frac` up
+/// to `cell + 1`). Without this, `pdf(sample.x)` could report the neighbour's
+/// density, which can differ from the sampled cell's by any factor.
+#[inline]
+pub(crate) fn place_in_cell(cell: usize, frac: f32, n: usize) -> f32 {
+    let mut x = ((cell as f32 + frac) / n as f32).min(ONE_MINUS_EPSILON);
+    for _ in 0..8 {
+        match cell_index(x, n).cmp(&cell) {
+            std::cmp::Ordering::Greater => x = x.next_down(),
+            std::cmp::Ordering::Less => x = x.next_up(),
+            std::cmp::Ordering::Equal => break,
+        }
+    }
+    x
 }
 
 /// The largest `f32` below 1: continuous samples stay in `[0, 1)`.
@@ -196,9 +220,7 @@ impl Distribution1D {
     /// Density at `x ∈ [0, 1]`: `f[⌊x n⌋] / integral`, or 0 for a zero function.
     #[inline]
     pub fn pdf(&self, x: f32) -> f32 {
-        let n = self.func.len();
-        let cell = ((x * n as f32).max(0.0) as usize).min(n - 1);
-        self.cell_pdf(cell)
+        self.cell_pdf(cell_index(x, self.func.len()))
     }
 
     #[inline]
@@ -216,9 +238,8 @@ impl Distribution1D {
     #[inline]
     pub fn sample_continuous(&self, xi: f32) -> Sample1D {
         let (cell, du) = sample_segment(&self.cdf, xi);
-        let n = self.func.len() as f32;
         Sample1D {
-            x: ((cell as f32 + du) / n).min(ONE_MINUS_EPSILON),
+            x: place_in_cell(cell, du, self.func.len()),
             pdf: self.cell_pdf(cell),
             cell,
         }
@@ -420,9 +441,7 @@ impl Distribution2D {
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
     #[inline]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        let iu = ((uv[0] * self.nu as f32).max(0.0) as usize).min(self.nu - 1);
-        let iv = ((uv[1] * self.nv as f32).max(0.0) as usize).min(self.nv - 1);
-        self.cell_pdf(iu, iv)
+        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`
@@ -433,8 +452,8 @@ impl Distribution2D {
         let (iu, du) = sample_segment(self.row_cdf(iv), xi[0]);
         Sample2D {
             uv: [
-                ((iu as f32 + du) / self.nu as f32).min(ONE_MINUS_EPSILON),
-                ((iv as f32 + dv) / self.nv as f32).min(ONE_MINUS_EPSILON),
+                place_in_cell(iu, du, self.nu),
+                place_in_cell(iv, dv, self.nv),
             ],
             pdf: self.cell_pdf(iu, iv),
             cell: [iu, iv],
@@ -445,8 +464,7 @@ impl Distribution2D {
     #[inline]
     pub fn invert(&self, uv: [f32; 2]) -> [f32; 2] {
         let xi1 = invert_segment(&self.marginal.cdf, uv[1]);
-        let iv = ((uv[1] * self.nv as f32).max(0.0) as usize).min(self.nv - 1);
-        let xi0 = invert_segment(self.row_cdf(iv), uv[0]);
+        let xi0 = invert_segment(self.row_cdf(cell_index(uv[1], self.nv)), uv[0]);
         [xi0, xi1]
     }
 }
@@ -548,6 +566,41 @@ mod tests {
         let back = d.invert(s.uv);
         assert!(close(back[0], 0.75) && close(back[1], 0.1), "{back:?}");
         assert_eq!(d.pdf([0.5, 0.25]), 0.0);
+    }
+
+    #[test]
+    fn samples_stay_in_their_cell_despite_rounding() {
+        // A cell next to one a hundred orders of magnitude dimmer: ξ at the very top
+        // of the bright cell's CDF segment gives du just below 1, and (cell + du) / n
+        // rounds onto the boundary with the dim cell (found by the fuzzer).
+        let n = 7;
+        let f = [1e-20, 1e-20, 1e-20, 5.0, 1e-30, 1e-20, 1e-20];
+        let d = Distribution1D::new(&f);
+        for k in 0..=4096 {
+            let lo = d.cdf()[3];
+            let hi = d.cdf()[4];
+            let xi = (lo + (hi - lo) * k as f32 / 4096.0).min(hi.next_down());
+            let s = d.sample_continuous(xi);
+            assert_eq!(d.pdf(s.x), s.pdf, "ξ={xi} x={} cell {}", s.x, s.cell);
+        }
+        for cell in 0..n {
+            for frac in [0.0, 1e-9, 0.5, ONE_MINUS_EPSILON, 1.0] {
+                let x = place_in_cell(cell, frac, n);
+                assert_eq!(cell_index(x, n), cell, "cell {cell} frac {frac}");
+            }
+        }
+        let d2 = Distribution2D::new(&[1e-23, 2.35, 2.35, 1e-23, 1e-23, 2.35], 3);
+        for k in 0..=1000u64 {
+            let xi = envlight_xi(k);
+            let s = d2.sample_continuous(xi);
+            assert_eq!(d2.pdf(s.uv), s.pdf, "{s:?}");
+        }
+    }
+
+    fn envlight_xi(k: u64) -> [f32; 2] {
+        let near_one = ONE_MINUS_EPSILON - (k % 7) as f32 * f32::EPSILON;
+        let a = crate::rng::xi_2d(3, k);
+        [if k % 2 == 0 { near_one } else { a[0] }, a[1]]
     }
 
     #[test]

@@ -1,0 +1,177 @@
+//! `envlight bench`: how fast the light builds and answers queries on a map, with
+//! a memory floor measured in the same run so build time reads as a ratio.
+
+use std::hint::black_box;
+use std::io::Write;
+use std::time::Instant;
+
+use anyhow::Context;
+use envlight::{EnvironmentLight, Vec3};
+use serde_json::json;
+
+use super::Outcome;
+use crate::light_args::LightArgs;
+use crate::output::Output;
+
+/// Arguments of `envlight bench`.
+#[derive(Debug, clap::Args)]
+#[command(after_help = concat!(
+    "Measures, on this machine and map: load_ms (read and decode), build_ms (best of \
+--repeat builds on all threads), build_ms_1thread (best build on one thread), floor_ms \
+(the memory floor: one parallel pass that reads every texel and writes one f32 per \
+texel), sample_ns / pdf_ns / radiance_ns (mean per call on one thread, random ξ or \
+uniformly random directions), batch_samples_per_s (the batch API on all threads) and \
+bytes_per_texel (sampling data, the image itself aside).\n\n\
+With --json, one object with exactly the keys width, height, threads, load_ms, \
+build_ms, build_ms_1thread, floor_ms, sample_ns, pdf_ns, radiance_ns, \
+batch_samples_per_s, bytes_per_texel (all numbers).\n\n",
+    crate::conventions!()
+))]
+pub struct Args {
+    #[command(flatten)]
+    light: LightArgs,
+
+    /// Print one JSON object instead of the readable table.
+    #[arg(long)]
+    json: bool,
+
+    /// Queries per timed loop (per-call figures average over this many calls).
+    #[arg(long, value_name = "N", default_value_t = 1 << 20,
+          value_parser = clap::value_parser!(u64).range(1024..=1 << 28))]
+    queries: u64,
+
+    /// Builds (and floor passes) to time; the fastest is reported.
+    #[arg(long, value_name = "K", default_value_t = 3,
+          value_parser = clap::value_parser!(u32).range(1..=100))]
+    repeat: u32,
+}
+
+/// Runs `envlight bench`.
+pub fn run(args: &Args) -> anyhow::Result<Outcome> {
+    let loaded = args.light.load()?;
+    let light = &loaded.light;
+    let options = *light.options();
+    let image = light.image();
+    let texels = image.width() * image.height();
+    let threads = rayon::current_num_threads();
+
+    let best_ms = |mut f: Box<dyn FnMut() + '_>| {
+        (0..args.repeat)
+            .map(|_| {
+                let started = Instant::now();
+                f();
+                started.elapsed().as_secs_f64() * 1e3
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+
+    let floor_ms = best_ms(Box::new(|| {
+        black_box(memory_floor(image.texels()));
+    }));
+    let build = || {
+        let light = EnvironmentLight::new(image.clone(), options);
+        black_box(light.is_ok());
+    };
+    // The clone is part of neither figure: time it alone and subtract it.
+    let clone_ms = best_ms(Box::new(|| {
+        black_box(image.clone());
+    }));
+    let build_ms = (best_ms(Box::new(build)) - clone_ms).max(0.0);
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .context("cannot start a one-thread pool")?;
+    let build_ms_1thread =
+        (one_thread.install(|| best_ms(Box::new(build))) - clone_ms).max(0.0);
+
+    let n = args.queries;
+    let xi: Vec<[f32; 2]> = (0..n).map(|k| envlight::rng::xi_2d(0xbe7c, k)).collect();
+    let dirs: Vec<Vec3> = xi.iter().map(|&x| uniform_sphere(x)).collect();
+
+    let per_call_ns = |f: &dyn Fn() -> f32| {
+        let started = Instant::now();
+        black_box(f());
+        started.elapsed().as_secs_f64() * 1e9 / n as f64
+    };
+    let (sample_ns, pdf_ns, radiance_ns) = one_thread.install(|| {
+        (
+            per_call_ns(&|| xi.iter().map(|&x| light.sample(x).map_or(0.0, |s| s.pdf)).sum()),
+            per_call_ns(&|| dirs.iter().map(|&d| light.pdf(d)).sum()),
+            per_call_ns(&|| dirs.iter().map(|&d| light.radiance(d)[1]).sum()),
+        )
+    });
+    let mut out_samples = vec![None; xi.len()];
+    let started = Instant::now();
+    light.sample_batch(&xi, &mut out_samples);
+    let batch_samples_per_s = n as f64 / started.elapsed().as_secs_f64();
+    black_box(&out_samples);
+    let bytes_per_texel = light.sampling_bytes() as f64 / texels as f64;
+
+    let mut out = Output::create(None)?;
+    let text = if args.json {
+        let value = json!({
+            "width": image.width(),
+            "height": image.height(),
+            "threads": threads,
+            "load_ms": loaded.load_ms,
+            "build_ms": build_ms,
+            "build_ms_1thread": build_ms_1thread,
+            "floor_ms": floor_ms,
+            "sample_ns": sample_ns,
+            "pdf_ns": pdf_ns,
+            "radiance_ns": radiance_ns,
+            "batch_samples_per_s": batch_samples_per_s,
+            "bytes_per_texel": bytes_per_texel,
+        });
+        format!("{value}\n")
+    } else {
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        format!(
+            "map               {}\n\
+             size              {} x {} ({:.1} Mtexels), {threads} threads\n\
+             load              {:>10.1} ms\n\
+             build             {build_ms:>10.1} ms   ({:.2}x the memory floor)\n\
+             build, 1 thread   {build_ms_1thread:>10.1} ms   ({:.2}x the floor)\n\
+             memory floor      {floor_ms:>10.1} ms   (read every texel, write one f32)\n\
+             sample            {sample_ns:>10.1} ns   (1 thread)\n\
+             pdf               {pdf_ns:>10.1} ns   (1 thread)\n\
+             radiance          {radiance_ns:>10.1} ns   (1 thread)\n\
+             batch sample      {:>10.2} M/s  (all threads)\n\
+             sampling data     {bytes_per_texel:>10.2} bytes per texel\n",
+            loaded.name,
+            image.width(),
+            image.height(),
+            texels as f64 / 1e6,
+            loaded.load_ms,
+            ratio(build_ms, floor_ms),
+            ratio(build_ms_1thread, floor_ms),
+            batch_samples_per_s / 1e6,
+        )
+    };
+    out.write_all(text.as_bytes())?;
+    out.finish()?;
+    Ok(Outcome::Success)
+}
+
+/// The memory floor of a build: read every texel once and write one `f32` per texel
+/// (its luminance), in parallel.
+fn memory_floor(texels: &[[f32; 3]]) -> Vec<f32> {
+    use rayon::prelude::*;
+    let mut out = vec![0.0f32; texels.len()];
+    out.par_chunks_mut(1 << 16)
+        .zip(texels.par_chunks(1 << 16))
+        .for_each(|(o, t)| {
+            for (dst, &rgb) in o.iter_mut().zip(t) {
+                *dst = envlight::color::luminance(rgb);
+            }
+        });
+    out
+}
+
+/// A uniformly distributed direction on the sphere for `ξ ∈ [0, 1)²`.
+fn uniform_sphere(xi: [f32; 2]) -> Vec3 {
+    let z = 1.0 - 2.0 * xi[0];
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * xi[1];
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}

@@ -1,0 +1,619 @@
+//! `envlight importance`: a PNG showing the map and the density it is sampled with.
+//!
+//! Layout, top to bottom: the tone-mapped map, then a heat map of the solid-angle
+//! pdf on a log scale (viridis, with a colour bar; pdf 0 is black), both in world
+//! space (so `--rotate` shows), both with θ ticks down the left side and φ ticks
+//! along the bottom. Sample directions, when asked for, are dots on both panels.
+
+mod font;
+
+use std::f64::consts::PI;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use envlight::color::{linear_to_srgb, luminance};
+use envlight::mapping::direction_to_equirect;
+use envlight::EnvironmentLight;
+use image::ImageEncoder;
+use rayon::prelude::*;
+
+use super::Outcome;
+use crate::light_args::LightArgs;
+use crate::output::Output;
+
+/// Arguments of `envlight importance`.
+#[derive(Debug, clap::Args)]
+#[command(after_help = concat!(
+    "The picture: on top the map, tone mapped (exposure from its median luminance, a \
+filmic curve, sRGB); below it the solid-angle sampling density p(ω) in sr⁻¹ on a log \
+scale (viridis; black where p = 0) with its colour bar. Both panels are the \
+equirectangular world view: θ (0° = +z, up) runs down the side, φ (0° = +x, 90° = +y) \
+along the bottom. With --samples N the first N directions `envlight sample` would draw \
+(same --seed) are drawn as magenta dots on both panels. Maps wider than --width are \
+box-filtered down to it.\n\n",
+    crate::conventions!()
+))]
+pub struct Args {
+    #[command(flatten)]
+    light: LightArgs,
+
+    /// The PNG file to write (atomically).
+    #[arg(short = 'o', long = "output", value_name = "FILE.png")]
+    output: PathBuf,
+
+    /// Draw the first N sample directions as dots.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    samples: u64,
+
+    /// Seed of the sample sequence (as in `envlight sample`).
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+
+    /// Width in pixels of each panel (the map is resampled to W × W/2).
+    #[arg(long, value_name = "W", default_value_t = 1024,
+          value_parser = clap::value_parser!(u32).range(64..=8192))]
+    width: u32,
+}
+
+/// Colours of the chrome.
+const BACKGROUND: [u8; 3] = [22, 22, 24];
+const INK: [u8; 3] = [225, 225, 225];
+const DIM: [u8; 3] = [150, 150, 150];
+const DOT: [u8; 3] = [255, 0, 255];
+const ZERO_PDF: [u8; 3] = [0, 0, 0];
+
+/// Runs `envlight importance`.
+pub fn run(args: &Args) -> anyhow::Result<Outcome> {
+    let loaded = args.light.load()?;
+    let light = &loaded.light;
+    let pw = args.width as usize;
+    let ph = (pw / 2).max(1);
+
+    let panels = Panels::new(light, pw, ph, args.light.rotate as f64);
+    let exposure = panels.exposure();
+    let (lo, hi) = panels.log_pdf_range();
+    let dots: Vec<(usize, usize)> = (0..args.samples)
+        .into_par_iter()
+        .filter_map(|k| {
+            let s = light.sample(envlight::rng::xi_2d(args.seed, k))?;
+            let [u, v] = direction_to_equirect(s.direction);
+            let x = ((u as f64 * pw as f64) as usize).min(pw - 1);
+            let y = ((v as f64 * ph as f64) as usize).min(ph - 1);
+            Some((x, y))
+        })
+        .collect();
+
+    let scale = if pw >= 512 { 2 } else { 1 };
+    let layout = Layout::new(pw, ph, scale);
+    let mut canvas = Canvas::new(layout.width, layout.height, BACKGROUND);
+
+    // Panel 1: the map.
+    let map_title = format!(
+        "RADIANCE  {}  EXPOSURE ×{}  FILMIC",
+        display_name(&loaded.name),
+        short_number(exposure as f64)
+    );
+    canvas.text(
+        layout.left,
+        layout.top1 - layout.title_gap(),
+        &map_title,
+        scale,
+        INK,
+    );
+    let map_pixels: Vec<[u8; 3]> = panels
+        .rgb
+        .par_iter()
+        .map(|&rgb| tone_map(rgb, exposure))
+        .collect();
+    canvas.blit(layout.left, layout.top1, pw, ph, &map_pixels);
+
+    // Panel 2: the density.
+    let mut density_title = "SAMPLING PDF PER SR, LOG SCALE".to_string();
+    if loaded.black {
+        density_title.push_str("  (ALL BLACK: PDF 0)");
+    }
+    if args.samples > 0 {
+        density_title.push_str(&format!("  {} SAMPLES", args.samples));
+    }
+    canvas.text(
+        layout.left,
+        layout.top2 - layout.title_gap(),
+        &density_title,
+        scale,
+        INK,
+    );
+    let heat_pixels: Vec<[u8; 3]> = panels
+        .pdf
+        .par_iter()
+        .map(|&p| heat_colour(p, lo, hi))
+        .collect();
+    canvas.blit(layout.left, layout.top2, pw, ph, &heat_pixels);
+
+    for &top in &[layout.top1, layout.top2] {
+        for &(x, y) in &dots {
+            canvas.dot(layout.left + x, top + y, scale, DOT);
+        }
+        canvas.axes(&layout, top);
+    }
+    canvas.colour_bar(&layout, lo, hi);
+
+    let mut out = Output::create(Some(&args.output))?;
+    let name = out.name();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(
+            &canvas.pixels,
+            canvas.width as u32,
+            canvas.height as u32,
+            image::ExtendedColorType::Rgb8,
+        )
+        .with_context(|| format!("{name}: cannot write PNG"))?;
+    out.finish()?;
+    Ok(Outcome::Success)
+}
+
+/// The last path component of a map name, for the title.
+fn display_name(name: &str) -> String {
+    let base = std::path::Path::new(name)
+        .file_name()
+        .map_or_else(|| name.to_string(), |n| n.to_string_lossy().into_owned());
+    base.chars().take(40).collect()
+}
+
+/// A number with about three significant digits, without exponent for moderate values.
+fn short_number(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor() as i32;
+    if (-3..=4).contains(&magnitude) {
+        let decimals = (2 - magnitude).max(0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.2e}").to_uppercase()
+    }
+}
+
+/// The map and its density resampled to the panel size, in world space.
+struct Panels {
+    /// Linear radiance per pixel (box-filtered), row-major.
+    rgb: Vec<[f32; 3]>,
+    /// Solid-angle pdf per pixel: the probability in the pixel over its solid angle.
+    pdf: Vec<f32>,
+}
+
+impl Panels {
+    fn new(light: &EnvironmentLight, pw: usize, ph: usize, rotate_degrees: f64) -> Self {
+        let image = light.image();
+        let (w, h) = (image.width(), image.height());
+        let scale = light.options().scale;
+        // Box filter to the panel size in image (light) space: channels R, G, B and
+        // the image-space density p(u, v) = p(ω) 2π² sin θ, both of which average
+        // over area. p(ω) comes from pdf() at each texel centre, so this shows
+        // whatever density the light samples with.
+        let columns = area_weights(w, pw);
+        let rows = area_weights(h, ph);
+        let horizontal: Vec<Vec<[f32; 4]>> = (0..h)
+            .into_par_iter()
+            .map(|j| {
+                let row = image.row(j);
+                let v = (j as f32 + 0.5) / h as f32;
+                let jacobian = (2.0 * PI * PI * (PI * v as f64).sin()) as f32;
+                let density: Vec<f32> = (0..w)
+                    .map(|i| {
+                        let u = (i as f32 + 0.5) / w as f32;
+                        light.pdf(light.uv_to_direction([u, v])) * jacobian
+                    })
+                    .collect();
+                columns
+                    .iter()
+                    .map(|taps| {
+                        let mut acc = [0.0f32; 4];
+                        for &(i, wgt) in taps {
+                            let t = row[i];
+                            let p = density[i];
+                            for (a, value) in acc.iter_mut().zip([t[0], t[1], t[2], p]) {
+                                *a += wgt * value;
+                            }
+                        }
+                        acc
+                    })
+                    .collect()
+            })
+            .collect();
+        let light_space: Vec<[f32; 4]> = (0..ph)
+            .into_par_iter()
+            .flat_map_iter(|r| {
+                let mut out = vec![[0.0f32; 4]; pw];
+                for &(j, wgt) in &rows[r] {
+                    for (o, src) in out.iter_mut().zip(&horizontal[j]) {
+                        for k in 0..4 {
+                            o[k] += wgt * src[k];
+                        }
+                    }
+                }
+                // p(ω) = p(u, v) / (2π² sin θ), with sin θ averaged over the pixel's
+                // rows (exact: the pixel's probability over its solid angle).
+                let (v0, v1) = (r as f64 / ph as f64, (r + 1) as f64 / ph as f64);
+                let mean_sin = ((PI * v0).cos() - (PI * v1).cos()) / (PI * (v1 - v0));
+                let jacobian = (2.0 * PI * PI * mean_sin) as f32;
+                for o in &mut out {
+                    o[3] = if jacobian > 0.0 { o[3] / jacobian } else { 0.0 };
+                }
+                out.into_iter()
+            })
+            .collect();
+        // World space: rotating the light by α about +z moves light azimuth φ to
+        // φ + α, so world column x shows light u = u_x - α/360.
+        let shift = (rotate_degrees / 360.0).rem_euclid(1.0);
+        let source_column: Vec<usize> = (0..pw)
+            .map(|x| {
+                let u = ((x as f64 + 0.5) / pw as f64 - shift).rem_euclid(1.0);
+                ((u * pw as f64) as usize).min(pw - 1)
+            })
+            .collect();
+        let mut rgb = Vec::with_capacity(pw * ph);
+        let mut pdf = Vec::with_capacity(pw * ph);
+        for y in 0..ph {
+            for &x in &source_column {
+                let t = light_space[y * pw + x];
+                rgb.push([t[0] * scale, t[1] * scale, t[2] * scale]);
+                pdf.push(t[3]);
+            }
+        }
+        Self { rgb, pdf }
+    }
+
+    /// Exposure that puts the median pixel luminance at mid grey (0.18); falls back
+    /// on the mean for maps that are mostly black, and on 1 for black maps.
+    fn exposure(&self) -> f32 {
+        let mut y: Vec<f32> = self.rgb.iter().map(|&c| luminance(c)).collect();
+        let mean = y.iter().map(|&v| v as f64).sum::<f64>() / y.len().max(1) as f64;
+        let middle = y.len() / 2;
+        let median = if y.is_empty() {
+            0.0
+        } else {
+            *y.select_nth_unstable_by(middle, f32::total_cmp).1
+        };
+        let key = if median > 0.0 { median as f64 } else { mean };
+        if key > 0.0 && key.is_finite() {
+            (0.18 / key) as f32
+        } else {
+            1.0
+        }
+    }
+
+    /// `(log10 min, log10 max)` of the colour scale: the largest pdf down to the
+    /// smallest positive one, at most 6 decades, at least 1.
+    fn log_pdf_range(&self) -> (f32, f32) {
+        let positive = self
+            .pdf
+            .iter()
+            .copied()
+            .filter(|&p| p > 0.0 && p.is_finite());
+        let (min, max) = positive.fold((f32::INFINITY, 0.0f32), |(a, b), p| (a.min(p), b.max(p)));
+        if max <= 0.0 {
+            return (-1.0, 0.0);
+        }
+        let hi = max.log10();
+        let lo = min.log10().max(hi - 6.0).min(hi - 1.0);
+        (lo, hi)
+    }
+}
+
+/// For each of `n_dst` equal cells over `n_src` equal cells, the source cells it
+/// overlaps and their share of its length (summing to 1): a box filter that
+/// averages when shrinking and repeats when enlarging.
+fn area_weights(n_src: usize, n_dst: usize) -> Vec<Vec<(usize, f32)>> {
+    let ratio = n_src as f64 / n_dst as f64;
+    (0..n_dst)
+        .map(|k| {
+            let (a, b) = (k as f64 * ratio, (k + 1) as f64 * ratio);
+            let first = (a.floor() as usize).min(n_src - 1);
+            let last = ((b.ceil() as usize).max(first + 1)).min(n_src);
+            (first..last)
+                .filter_map(|i| {
+                    let overlap = (b.min(i as f64 + 1.0) - a.max(i as f64)).max(0.0);
+                    (overlap > 0.0).then_some((i, (overlap / (b - a)) as f32))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Exposure, the ACES filmic fit (Narkowicz 2015), then sRGB encoding.
+fn tone_map(rgb: [f32; 3], exposure: f32) -> [u8; 3] {
+    rgb.map(|c| {
+        let x = (c * exposure).max(0.0);
+        let mapped = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14);
+        let encoded = linear_to_srgb(if mapped.is_finite() { mapped } else { 1.0 });
+        (encoded * 255.0 + 0.5) as u8
+    })
+}
+
+/// Viridis (matplotlib), sampled at nine evenly spaced stops.
+const VIRIDIS: [[u8; 3]; 9] = [
+    [68, 1, 84],
+    [71, 45, 123],
+    [59, 82, 139],
+    [44, 114, 142],
+    [33, 145, 140],
+    [40, 174, 128],
+    [94, 201, 98],
+    [173, 220, 48],
+    [253, 231, 37],
+];
+
+/// The colormap at `t ∈ [0, 1]` (linear between stops).
+fn viridis(t: f32) -> [u8; 3] {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (VIRIDIS.len() - 1) as f32;
+    let i = (x as usize).min(VIRIDIS.len() - 2);
+    let f = x - i as f32;
+    let (a, b) = (VIRIDIS[i], VIRIDIS[i + 1]);
+    [0, 1, 2].map(|k| (a[k] as f32 + f * (b[k] as f32 - a[k] as f32) + 0.5) as u8)
+}
+
+/// The heat-map colour of pdf `p` on the log scale `[lo, hi]`.
+fn heat_colour(p: f32, lo: f32, hi: f32) -> [u8; 3] {
+    if p.is_nan() || p <= 0.0 {
+        return ZERO_PDF;
+    }
+    viridis((p.log10() - lo) / (hi - lo))
+}
+
+/// Where everything goes on the canvas, in pixels.
+struct Layout {
+    width: usize,
+    height: usize,
+    scale: usize,
+    /// Left edge of both panels.
+    left: usize,
+    /// Top edges of the two panels.
+    top1: usize,
+    top2: usize,
+    panel_w: usize,
+    panel_h: usize,
+}
+
+impl Layout {
+    fn new(panel_w: usize, panel_h: usize, scale: usize) -> Self {
+        let line = (font::GLYPH_H + 3) * scale;
+        let tick = 4 * scale;
+        // θ axis: "θ" then labels like "180°" then the tick.
+        let left = font::text_width("θ 180°", scale) + tick + 6 * scale;
+        let top1 = 2 * line;
+        // Below a panel: tick, φ labels, the axis name, then the next title.
+        let below = tick + 2 * line + line / 2;
+        let top2 = top1 + panel_h + below + line;
+        let right =
+            8 * scale + 10 * scale + 4 * scale + font::text_width("1E-10", scale) + 8 * scale;
+        Self {
+            width: left + panel_w + right,
+            height: top2 + panel_h + below,
+            scale,
+            left,
+            top1,
+            top2,
+            panel_w,
+            panel_h,
+        }
+    }
+
+    fn title_gap(&self) -> usize {
+        (font::GLYPH_H + 4) * self.scale
+    }
+}
+
+/// An RGB8 image being drawn.
+struct Canvas {
+    width: usize,
+    height: usize,
+    pixels: Vec<u8>,
+}
+
+impl Canvas {
+    fn new(width: usize, height: usize, background: [u8; 3]) -> Self {
+        let mut pixels = Vec::with_capacity(width * height * 3);
+        for _ in 0..width * height {
+            pixels.extend_from_slice(&background);
+        }
+        Self {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    #[inline]
+    fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
+        if x < self.width && y < self.height {
+            let i = 3 * (y * self.width + x);
+            self.pixels[i..i + 3].copy_from_slice(&c);
+        }
+    }
+
+    fn fill(&mut self, x: usize, y: usize, w: usize, h: usize, c: [u8; 3]) {
+        for yy in y..y + h {
+            for xx in x..x + w {
+                self.set(xx, yy, c);
+            }
+        }
+    }
+
+    fn blit(&mut self, x: usize, y: usize, w: usize, h: usize, src: &[[u8; 3]]) {
+        for yy in 0..h {
+            for xx in 0..w {
+                self.set(x + xx, y + yy, src[yy * w + xx]);
+            }
+        }
+    }
+
+    fn text(&mut self, x: usize, y: usize, text: &str, scale: usize, c: [u8; 3]) {
+        for (n, ch) in text.chars().enumerate() {
+            let gx = x + n * font::ADVANCE * scale;
+            for (row, bits) in font::glyph(ch).iter().enumerate() {
+                for col in 0..font::GLYPH_W {
+                    if bits & (1 << (font::GLYPH_W - 1 - col)) != 0 {
+                        self.fill(gx + col * scale, y + row * scale, scale, scale, c);
+                    }
+                }
+            }
+        }
+    }
+
+    /// A sample dot: a small square.
+    fn dot(&mut self, x: usize, y: usize, scale: usize, c: [u8; 3]) {
+        let r = scale.div_ceil(2);
+        for yy in y.saturating_sub(r)..=y + r {
+            for xx in x.saturating_sub(r)..=x + r {
+                self.set(xx, yy, c);
+            }
+        }
+    }
+
+    /// Frame, θ ticks down the left (every 30°) and φ ticks along the bottom.
+    fn axes(&mut self, layout: &Layout, top: usize) {
+        let s = layout.scale;
+        let (left, w, h) = (layout.left, layout.panel_w, layout.panel_h);
+        let tick = 4 * s;
+        // Frame just outside the panel.
+        self.fill(left - 1, top - 1, w + 2, 1, DIM);
+        self.fill(left - 1, top + h, w + 2, 1, DIM);
+        self.fill(left - 1, top - 1, 1, h + 2, DIM);
+        self.fill(left + w, top - 1, 1, h + 2, DIM);
+        let glyph_h = font::GLYPH_H * s;
+        for theta in (0..=180).step_by(30) {
+            let y = top + ((theta as f64 / 180.0) * (h - 1) as f64).round() as usize;
+            self.fill(left - 1 - tick, y, tick, s, DIM);
+            let label = format!("{theta}°");
+            let lw = font::text_width(&label, s);
+            let ty = (y + s / 2)
+                .saturating_sub(glyph_h / 2)
+                .clamp(top.saturating_sub(glyph_h / 2), top + h - glyph_h / 2);
+            self.text(left - 1 - tick - 2 * s - lw, ty, &label, s, INK);
+        }
+        // The axis name, halfway down, left of the labels.
+        self.text(s, top + h / 2 + 8 * s, "θ", s, INK);
+        // φ: the widest spacing that still leaves room between labels.
+        let label_w = font::text_width("360°", s) as f64;
+        let step = [45, 90, 180]
+            .into_iter()
+            .find(|&d| d as f64 / 360.0 * w as f64 >= 1.5 * label_w)
+            .unwrap_or(180);
+        for phi in (0..=360).step_by(step) {
+            let x = left + ((phi as f64 / 360.0) * (w - 1) as f64).round() as usize;
+            self.fill(x, top + h + 1, s, tick, DIM);
+            let label = format!("{phi}°");
+            let lw = font::text_width(&label, s);
+            let lx = x
+                .saturating_sub(lw / 2)
+                .clamp(left.saturating_sub(lw / 2), left + w - lw / 2);
+            self.text(lx, top + h + 1 + tick + 2 * s, &label, s, INK);
+        }
+        let name_y = top + h + 1 + tick + 2 * s + (font::GLYPH_H + 3) * s;
+        self.text(
+            left + w / 2 - font::text_width("φ", s) / 2,
+            name_y,
+            "φ",
+            s,
+            INK,
+        );
+    }
+
+    /// The density panel's colour bar with decade labels, and a swatch for pdf 0.
+    fn colour_bar(&mut self, layout: &Layout, lo: f32, hi: f32) {
+        let s = layout.scale;
+        let x = layout.left + layout.panel_w + 8 * s;
+        let bar_w = 10 * s;
+        let top = layout.top2;
+        let swatch = 8 * s;
+        let h = layout.panel_h.saturating_sub(swatch + 4 * s).max(2);
+        for yy in 0..h {
+            let t = 1.0 - yy as f32 / (h - 1) as f32;
+            self.fill(x, top + yy, bar_w, 1, viridis(t));
+        }
+        self.fill(x, top + h + 4 * s, bar_w, swatch, ZERO_PDF);
+        self.fill(x - 1, top + h + 4 * s - 1, bar_w + 2, 1, DIM);
+        self.fill(x - 1, top + h + 4 * s + swatch, bar_w + 2, 1, DIM);
+        let label_x = x + bar_w + 4 * s;
+        let glyph_h = font::GLYPH_H * s;
+        self.text(
+            label_x,
+            top + h + 4 * s + swatch / 2 - glyph_h / 2,
+            "0",
+            s,
+            INK,
+        );
+        // Decades, thinned so labels never overlap.
+        let per_decade = h as f32 / (hi - lo);
+        let every = ((2.0 * glyph_h as f32 / per_decade).ceil() as i32).max(1);
+        let first = lo.ceil() as i32;
+        let last = hi.floor() as i32;
+        for k in first..=last {
+            if (last - k) % every != 0 {
+                continue;
+            }
+            let y = top + ((hi - k as f32) * per_decade).round() as usize;
+            // The tick is a notch across the bar: outside it would read as a minus.
+            self.fill(x, y.min(top + h - 1), bar_w, 1, BACKGROUND);
+            let ty = y
+                .saturating_sub(glyph_h / 2)
+                .clamp(top.saturating_sub(glyph_h / 2), top + h);
+            self.text(label_x, ty, &decade_label(k), s, INK);
+        }
+    }
+}
+
+/// `10^k` as a short label: plain decimals for -2..=3, `1E{k}` otherwise.
+fn decade_label(k: i32) -> String {
+    match k {
+        -2 => "0.01".into(),
+        -1 => "0.1".into(),
+        0 => "1".into(),
+        1 => "10".into(),
+        2 => "100".into(),
+        3 => "1000".into(),
+        _ => format!("1E{k}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn area_weights_partition_each_cell() {
+        for (n_src, n_dst) in [(8, 4), (7, 3), (3, 7), (1, 5), (5, 1), (2048, 1024)] {
+            let weights = area_weights(n_src, n_dst);
+            assert_eq!(weights.len(), n_dst);
+            let mut per_source = vec![0.0f64; n_src];
+            for taps in &weights {
+                let sum: f32 = taps.iter().map(|t| t.1).sum();
+                assert!((sum - 1.0).abs() < 1e-5, "{n_src}->{n_dst}: {sum}");
+                for &(i, w) in taps {
+                    per_source[i] += w as f64 * n_src as f64 / n_dst as f64;
+                }
+            }
+            // Every source cell is used exactly once in total.
+            for s in per_source {
+                assert!((s - 1.0).abs() < 1e-4, "{n_src}->{n_dst}: {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn colours_cover_the_scale() {
+        assert_eq!(viridis(0.0), VIRIDIS[0]);
+        assert_eq!(viridis(1.0), VIRIDIS[8]);
+        assert_eq!(viridis(f32::NAN), VIRIDIS[0]);
+        assert_eq!(heat_colour(0.0, -1.0, 1.0), ZERO_PDF);
+        assert_eq!(tone_map([0.0; 3], 1.0), [0, 0, 0]);
+        assert_eq!(tone_map([1e30; 3], 1.0)[0], 255);
+        assert_eq!(short_number(1.6234), "1.62");
+        assert_eq!(short_number(123.4), "123");
+    }
+}

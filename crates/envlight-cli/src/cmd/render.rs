@@ -1,0 +1,255 @@
+//! `envlight render`: the preview path tracer (crate `envlight-render`) lit by the map.
+//!
+//! One render with one strategy, written by extension (`.exr`/`.pfm` linear, `.png`
+//! tone mapped); or, with `--compare`, every strategy against a reference, a table on
+//! stdout and one labelled comparison PNG.
+//!
+//! Wiring (main.rs): a variant `Render(cmd::render::RenderArgs)` and the arm
+//! `Command::Render(args) => cmd::render::run(args).map(|()| cmd::Outcome::Success)`;
+//! Cargo.toml: `envlight-render = { path = "../envlight-render" }`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use anyhow::Context;
+use clap::builder::TypedValueParser as _;
+use envlight_render::{
+    auto_exposure, compare, encode_image, read_image, render_with_error, CompareSettings,
+    ImageFormat, RenderSettings, Scene, Strategy, SCENE_NAMES,
+};
+
+use super::UsageError;
+use crate::light_args::LightArgs;
+use crate::output::{write_bytes, Output};
+use crate::progress::Progress;
+
+/// Arguments of `envlight render`.
+#[derive(Debug, clap::Args)]
+#[command(after_help = concat!(
+    "Scenes: balls (diffuse, rough copper, near-mirror silver and blue plastic spheres on a \
+checkered ground), furnace (one diffuse sphere of albedo 0.5: under a constant map of \
+radiance 1 it renders 0.5 on the sphere and 1 around it).\n\n\
+Strategies estimate the light at each path vertex: uniform (uniform sphere directions), \
+bsdf (BSDF sampling only), light (environment importance sampling only), mis (both, \
+power heuristic), mis-compensated (mis with the map's mean luminance subtracted from the \
+light's sampling density, after Karlik et al. 2019; unbiased because BSDF sampling \
+covers what it leaves out). Paths use next-event estimation with shadow rays and \
+Russian roulette after 3 bounces. The image is the same for a given --seed whatever the \
+number of threads.\n\n\
+--compare renders every strategy at --spp (and for --equal-time SECONDS each), measures \
+RMSE and relative MSE against --reference FILE (.exr/.pfm) or a mis render at \
+--reference-spp, prints the table and writes a labelled PNG to -o.\n\n",
+    crate::conventions!()
+))]
+pub struct RenderArgs {
+    #[command(flatten)]
+    light: LightArgs,
+
+    /// Built-in scene.
+    #[arg(long, value_name = "NAME", default_value = "balls",
+          value_parser = clap::builder::PossibleValuesParser::new(SCENE_NAMES))]
+    scene: String,
+
+    /// Samples per pixel.
+    #[arg(long, value_name = "N", default_value_t = 64,
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    spp: u32,
+
+    /// How the light is estimated at each vertex.
+    #[arg(long, value_name = "S", default_value = "mis",
+          value_parser = clap::builder::PossibleValuesParser::new(Strategy::ALL.map(Strategy::name))
+              .map(|s| s.parse::<Strategy>().unwrap_or_default()))]
+    strategy: Strategy,
+
+    /// Image width in pixels.
+    #[arg(long, value_name = "W", default_value_t = 640,
+          value_parser = clap::value_parser!(u32).range(1..=16384))]
+    width: u32,
+
+    /// Image height in pixels.
+    #[arg(long, value_name = "H", default_value_t = 360,
+          value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: u32,
+
+    /// Largest number of surface interactions on a path.
+    #[arg(long, value_name = "D", default_value_t = 8,
+          value_parser = clap::value_parser!(u32).range(0..=1000))]
+    max_depth: u32,
+
+    /// Seed of the random streams.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+
+    /// Output file: .exr or .pfm (linear float) or .png (tone mapped). With --compare,
+    /// the comparison PNG.
+    #[arg(
+        short = 'o',
+        long = "output",
+        value_name = "FILE",
+        default_value = "render.png"
+    )]
+    output: PathBuf,
+
+    /// Exposure in stops applied before tone mapping (PNG only). Default: automatic,
+    /// the image's (with --compare, the reference's) log-average luminance made
+    /// middle grey.
+    #[arg(long, value_name = "STOPS", allow_hyphen_values = true)]
+    exposure: Option<f32>,
+
+    /// Render every strategy and compare them against a reference.
+    #[arg(long)]
+    compare: bool,
+
+    /// With --compare, also render each strategy for SECONDS of wall time.
+    #[arg(long, value_name = "SECONDS", requires = "compare")]
+    equal_time: Option<f64>,
+
+    /// With --compare, the reference image (.exr or .pfm of the same size) instead of
+    /// rendering one.
+    #[arg(long, value_name = "FILE", requires = "compare")]
+    reference: Option<PathBuf>,
+
+    /// With --compare and no --reference, samples per pixel of the mis reference.
+    #[arg(long, value_name = "N", default_value_t = 1024,
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    reference_spp: u32,
+}
+
+/// Adapts the renderer's `(stage, done, total)` reports to the CLI's progress bars:
+/// one bar per stage, replaced when the stage changes.
+struct Bars {
+    current: Mutex<Option<(String, Progress, u64)>>,
+}
+
+impl envlight_render::Progress for Bars {
+    fn report(&self, stage: &str, done: u64, total: u64) {
+        let Ok(mut current) = self.current.lock() else {
+            return;
+        };
+        if current.as_ref().map(|c| c.0.as_str()) != Some(stage) {
+            if let Some((_, bar, _)) = current.take() {
+                bar.finish();
+            }
+            *current = Some((stage.to_string(), Progress::bar(total, stage), 0));
+        }
+        if let Some((_, bar, last)) = current.as_mut() {
+            if done > *last {
+                bar.inc(done - *last);
+                *last = done;
+            }
+        }
+    }
+}
+
+impl Bars {
+    fn new() -> Self {
+        Self {
+            current: Mutex::new(None),
+        }
+    }
+
+    fn finish(&self) {
+        if let Ok(mut current) = self.current.lock() {
+            if let Some((_, bar, _)) = current.take() {
+                bar.finish();
+            }
+        }
+    }
+}
+
+/// Runs `envlight render`.
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    // Check what can be checked before any work.
+    let format =
+        ImageFormat::from_path(&args.output).map_err(|e| UsageError(format!("-o {}", e)))?;
+    if args.compare && format != ImageFormat::Png {
+        return Err(UsageError(format!(
+            "{}: --compare writes a PNG; use a .png output",
+            args.output.display()
+        ))
+        .into());
+    }
+    if let Some(t) = args.equal_time {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(UsageError(format!(
+                "--equal-time must be a positive number of seconds, got {t}"
+            ))
+            .into());
+        }
+    }
+    if args.exposure.is_some_and(|e| !e.is_finite()) {
+        return Err(UsageError("--exposure must be finite".into()).into());
+    }
+    let (width, height) = (args.width as usize, args.height as usize);
+    if width * height > 1 << 26 {
+        return Err(UsageError(format!(
+            "{width}x{height} is too large (at most 2^26 pixels)"
+        ))
+        .into());
+    }
+    let scene = Scene::builtin(&args.scene)
+        .ok_or_else(|| UsageError(format!("unknown scene '{}'", args.scene)))?;
+    let reference = match &args.reference {
+        Some(path) => {
+            let image = read_image(path)
+                .with_context(|| format!("{}: cannot read the reference", path.display()))?;
+            Some((image, path.display().to_string()))
+        }
+        None => None,
+    };
+
+    let loaded = args.light.load()?;
+    let settings = RenderSettings {
+        width,
+        height,
+        spp: args.spp,
+        max_depth: args.max_depth,
+        strategy: args.strategy,
+        seed: args.seed,
+    };
+    let bars = Bars::new();
+
+    if args.compare {
+        let compare_settings = CompareSettings {
+            render: settings,
+            strategies: Strategy::ALL.to_vec(),
+            equal_time: args.equal_time,
+            reference_spp: args.reference_spp,
+        };
+        let comparison = compare(&scene, &loaded.light, &compare_settings, reference, &bars)?;
+        bars.finish();
+        let exposure = args
+            .exposure
+            .unwrap_or_else(|| auto_exposure(&comparison.reference));
+        let png = comparison.sheet_png(exposure)?;
+        let mut out = Output::create(Some(&args.output))?;
+        write_bytes(&mut out, &png)?;
+        out.finish()?;
+        let mut stdout = Output::create(None)?;
+        write!(stdout, "{}", comparison.table()).context("<stdout>: write failed")?;
+        writeln!(stdout, "wrote {}", args.output.display()).context("<stdout>: write failed")?;
+        stdout.finish()?;
+    } else {
+        let rendered = render_with_error(&scene, &loaded.light, &settings, &bars);
+        bars.finish();
+        let exposure = args
+            .exposure
+            .unwrap_or_else(|| auto_exposure(&rendered.image));
+        let bytes = encode_image(&rendered.image, format, exposure)?;
+        let mut out = Output::create(Some(&args.output))?;
+        write_bytes(&mut out, &bytes)?;
+        out.finish()?;
+        let _ = writeln!(
+            std::io::stderr().lock(),
+            "wrote {} ({}x{}, {} spp, {}, {:.2} s)",
+            args.output.display(),
+            width,
+            height,
+            rendered.spp,
+            args.strategy,
+            rendered.seconds
+        );
+    }
+    Ok(())
+}

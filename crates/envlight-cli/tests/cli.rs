@@ -1,0 +1,938 @@
+//! Integration tests: run the real `envlight` binary on the builtin sky, small
+//! synthetic PFM maps written here, and (when present) the real maps in
+//! `shared/envmaps`, through every subcommand and error path.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+use tempfile::TempDir;
+
+const HEADER: &str = "x,y,z,pdf,r,g,b";
+
+fn envlight() -> Command {
+    Command::cargo_bin("envlight").expect("the envlight binary is built")
+}
+
+/// Writes a colour PFM by hand: `PF`, size, a negative scale (little-endian), then
+/// f32 RGB rows bottom to top. `texel(x, y)` has y = 0 at the top.
+fn write_pfm(path: &Path, w: usize, h: usize, texel: impl Fn(usize, usize) -> [f32; 3]) {
+    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
+    for y in (0..h).rev() {
+        for x in 0..w {
+            for c in texel(x, y) {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A small map with structure: a warm hot spot, a blue sky gradient, dark ground.
+fn test_map(x: usize, y: usize) -> [f32; 3] {
+    if (x, y) == (5, 2) {
+        [40.0, 30.0, 20.0]
+    } else if y < 4 {
+        [0.2 + 0.05 * x as f32, 0.3, 0.6 + 0.1 * y as f32]
+    } else {
+        [0.05, 0.04, 0.03 * (1 + x % 3) as f32]
+    }
+}
+
+/// A temporary directory holding `map.pfm` (16×8, [`test_map`]).
+fn pfm_dir() -> (TempDir, PathBuf) {
+    let dir = TempDir::new().unwrap();
+    let path = dir.path().join("map.pfm");
+    write_pfm(&path, 16, 8, test_map);
+    (dir, path)
+}
+
+/// `shared/envmaps` beside the workspace, when it is there.
+fn envmaps() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "skipped: {} not found (the real maps are optional)",
+            dir.display()
+        );
+        None
+    }
+}
+
+fn stdout_of(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{:?} failed: {}",
+        cmd,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn parse_rows(csv: &str) -> Vec<[f64; 7]> {
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(HEADER));
+    lines
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
+            assert_eq!(v.len(), 7, "{l}");
+            [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
+        })
+        .collect()
+}
+
+/// An error run: exit 1, stderr one line starting `error:` containing `needle`,
+/// and no panic.
+fn assert_error(cmd: &mut Command, needle: &str) -> String {
+    let out = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
+    let errors: Vec<&str> = stderr
+        .lines()
+        .filter(|l| !l.starts_with("warning:"))
+        .collect();
+    assert_eq!(errors.len(), 1, "stderr: {stderr}");
+    assert!(errors[0].starts_with("error: "), "stderr: {stderr}");
+    assert!(
+        errors[0].contains(needle),
+        "expected {needle:?} in: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "stderr: {stderr}");
+    stderr
+}
+
+// ---------------------------------------------------------------- info
+
+#[test]
+fn info_readable_on_builtin_sky() {
+    let text = stdout_of(envlight().arg("info"));
+    assert!(text.contains("builtin:sky"), "{text}");
+    assert!(text.contains("1024 x 512"), "{text}");
+    assert!(text.contains("efficiency"), "{text}");
+}
+
+const REQUIRED_KEYS: [&str; 9] = [
+    "width",
+    "height",
+    "format",
+    "integral_rgb",
+    "integral_luminance",
+    "max_luminance",
+    "brightest_direction",
+    "efficiency",
+    "build_ms",
+];
+
+fn info_json(args: &[&str]) -> serde_json::Value {
+    let text = stdout_of(envlight().arg("info").arg("--json").args(args));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for key in REQUIRED_KEYS {
+        assert!(v.get(key).is_some(), "missing {key} in {text}");
+    }
+    assert_eq!(v["integral_rgb"].as_array().unwrap().len(), 3);
+    assert_eq!(v["brightest_direction"].as_array().unwrap().len(), 3);
+    v
+}
+
+#[test]
+fn info_json_on_builtin_sky() {
+    let v = info_json(&["builtin:sky"]);
+    assert_eq!(v["format"], "builtin");
+    assert_eq!(v["width"], 1024);
+    assert_eq!(v["height"], 512);
+    assert_eq!(v["sampler"], "inversion");
+    let e = v["efficiency"].as_f64().unwrap();
+    assert!(e > 0.5 && e <= 1.0, "{e}");
+    // The builtin sun is 35° above the horizon.
+    let z = v["brightest_direction"][2].as_f64().unwrap();
+    assert!((z - 35f64.to_radians().sin()).abs() < 0.02, "{z}");
+}
+
+#[test]
+fn info_json_on_pfm_and_rotation_moves_the_brightest_direction() {
+    let (_dir, map) = pfm_dir();
+    let m = map.to_str().unwrap();
+    let v = info_json(&[m]);
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(16), Some(8))
+    );
+    assert_eq!(v["format"], "pfm");
+    assert_eq!(
+        v["max_luminance"].as_f64().unwrap() as f32,
+        0.212671 * 40.0 + 0.715160 * 30.0 + 0.072169 * 20.0
+    );
+    let r = info_json(&[m, "--rotate", "90", "--scale", "2"]);
+    let d = |v: &serde_json::Value| -> Vec<f64> {
+        v["brightest_direction"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_f64().unwrap())
+            .collect()
+    };
+    let (a, b) = (d(&v), d(&r));
+    // +90° about z: (x, y, z) -> (-y, x, z).
+    assert!(
+        (b[0] + a[1]).abs() < 1e-5 && (b[1] - a[0]).abs() < 1e-5 && (b[2] - a[2]).abs() < 1e-6,
+        "{a:?} {b:?}"
+    );
+    let (i1, i2) = (
+        v["integral_luminance"].as_f64().unwrap(),
+        r["integral_luminance"].as_f64().unwrap(),
+    );
+    assert!((i2 / i1 - 2.0).abs() < 1e-9);
+    // The scale leaves the efficiency alone.
+    assert!((v["efficiency"].as_f64().unwrap() - r["efficiency"].as_f64().unwrap()).abs() < 1e-9);
+}
+
+#[test]
+fn info_json_on_every_real_map() {
+    let Some(dir) = envmaps() else { return };
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if !["hdr", "exr"].contains(&ext) {
+            continue;
+        }
+        let v = info_json(&[path.to_str().unwrap()]);
+        assert_eq!(v["format"], ext, "{}", path.display());
+        assert_eq!(
+            v["width"].as_u64().unwrap(),
+            2 * v["height"].as_u64().unwrap()
+        );
+        assert!(v["integral_luminance"].as_f64().unwrap() > 0.0);
+        seen += 1;
+    }
+    assert!(seen >= 1);
+}
+
+// ---------------------------------------------------------------- sample
+
+#[test]
+fn sample_writes_the_exact_header_and_unit_directions() {
+    let text = stdout_of(envlight().args(["sample", "-n", "1000"]));
+    assert!(text.starts_with("x,y,z,pdf,r,g,b\n"));
+    let rows = parse_rows(&text);
+    assert_eq!(rows.len(), 1000);
+    for r in rows {
+        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        assert!((len - 1.0).abs() < 1e-6, "{r:?}");
+        assert!(r[3] > 0.0 && r[3].is_finite(), "{r:?}");
+        assert!(r[4..].iter().all(|c| *c >= 0.0 && c.is_finite()), "{r:?}");
+    }
+}
+
+#[test]
+fn sample_zero_rows_is_just_the_header() {
+    let text = stdout_of(envlight().args(["sample", "-n", "0"]));
+    assert_eq!(text, "x,y,z,pdf,r,g,b\n");
+}
+
+#[test]
+fn sample_is_deterministic_and_independent_of_thread_count() {
+    let (_dir, map) = pfm_dir();
+    // More rows than one formatting chunk, so several tasks share the work.
+    let args = [
+        "sample",
+        map.to_str().unwrap(),
+        "-n",
+        "30000",
+        "--seed",
+        "7",
+    ];
+    let run = |threads: Option<&str>| {
+        let mut cmd = envlight();
+        cmd.args(args);
+        match threads {
+            Some(t) => cmd.env("RAYON_NUM_THREADS", t),
+            None => cmd.env_remove("RAYON_NUM_THREADS"),
+        };
+        cmd.output().unwrap().stdout
+    };
+    let a = run(None);
+    assert!(a.len() > 30000 * 20);
+    assert_eq!(a, run(None));
+    assert_eq!(a, run(Some("1")));
+    assert_eq!(a, run(Some("3")));
+    let other =
+        stdout_of(envlight().args(["sample", map.to_str().unwrap(), "-n", "100", "--seed", "8"]));
+    assert_ne!(&a[..other.len()], other.as_bytes());
+}
+
+#[test]
+fn sample_to_a_file_equals_stdout() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("s.csv");
+    let to_stdout = stdout_of(envlight().args(["sample", "-n", "500", "--seed", "3"]));
+    envlight()
+        .args(["sample", "-n", "500", "--seed", "3", "-o"])
+        .arg(&out)
+        .assert()
+        .success()
+        .stdout("");
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), to_stdout);
+    // Only the output itself is left in the directory (no temporary file).
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn sample_follows_the_hot_spot() {
+    let (_dir, map) = pfm_dir();
+    let rows = parse_rows(&stdout_of(
+        envlight().arg("sample").arg(&map).args(["-n", "4000"]),
+    ));
+    // Texel (5, 2) of 16×8: u in [5/16, 6/16), v in [2/8, 3/8).
+    let hot = rows
+        .iter()
+        .filter(|r| {
+            let theta = r[2].acos() / std::f64::consts::PI;
+            let phi = r[1].atan2(r[0]).rem_euclid(2.0 * std::f64::consts::PI)
+                / (2.0 * std::f64::consts::PI);
+            (0.25..0.375).contains(&theta) && (5.0 / 16.0..6.0 / 16.0).contains(&phi)
+        })
+        .count();
+    assert!(hot > 1000, "{hot} of 4000 samples near the hot texel");
+}
+
+#[test]
+fn sample_sampler_names_are_checked() {
+    envlight()
+        .args(["sample", "-n", "3", "--sampler", "inversion"])
+        .assert()
+        .success();
+    envlight()
+        .args(["sample", "-n", "3", "--sampler", "alias"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("inversion"));
+}
+
+#[test]
+fn sample_round_trips_through_eval() {
+    let (dir, map) = pfm_dir();
+    for (m, extra) in [
+        (
+            map.to_str().unwrap(),
+            vec!["--rotate", "33.5", "--scale", "0.5"],
+        ),
+        (map.to_str().unwrap(), vec!["--lookup", "nearest"]),
+        ("builtin:sky", vec![]),
+    ] {
+        let samples = dir.path().join("samples.csv");
+        envlight()
+            .args(["sample", m, "-n", "5000", "--seed", "11", "-o"])
+            .arg(&samples)
+            .args(&extra)
+            .assert()
+            .success();
+        let evaluated = stdout_of(
+            envlight()
+                .args(["eval", m, "--dirs"])
+                .arg(&samples)
+                .args(&extra),
+        );
+        let a = parse_rows(&std::fs::read_to_string(&samples).unwrap());
+        let b = parse_rows(&evaluated);
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(&b) {
+            for k in 0..7 {
+                let tol = 1e-5 * x[k].abs().max(1e-30);
+                assert!((x[k] - y[k]).abs() <= tol, "{m} {extra:?}: {x:?} vs {y:?}");
+            }
+        }
+        // In fact bit-identical: every value is a function of the written direction.
+        assert_eq!(std::fs::read_to_string(&samples).unwrap(), evaluated);
+    }
+}
+
+// ---------------------------------------------------------------- eval
+
+#[test]
+fn eval_reads_columns_in_any_order_and_normalises() {
+    let input = "id, z ,note,y,X\n1, 2, up,0,0\n\n2,0,\"side\", 0 ,\"-3\"\n3,1e-30,x,1e-30,0\r\n";
+    let out = stdout_of(envlight().args(["eval", "--dirs", "-"]).write_stdin(input));
+    let rows = parse_rows(&out);
+    assert_eq!(rows.len(), 3);
+    assert_eq!(&rows[0][..3], &[0.0, 0.0, 1.0]);
+    assert_eq!(&rows[1][..3], &[-1.0, 0.0, 0.0]);
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    assert!(
+        (rows[2][1] - s).abs() < 1e-7 && (rows[2][2] - s).abs() < 1e-7,
+        "{:?}",
+        rows[2]
+    );
+    // +z: the zenith of the builtin sky is blue; exactly on the pole the density is
+    // 0 (a set of measure zero where the equirectangular Jacobian vanishes).
+    assert!(rows[0][6] > rows[0][4], "{:?}", rows[0]);
+    assert_eq!(rows[0][3], 0.0);
+    assert!(rows[1][3] > 0.0 && rows[2][3] > 0.0);
+}
+
+#[test]
+fn eval_agrees_with_sample_on_a_file() {
+    let (dir, map) = pfm_dir();
+    let dirs = dir.path().join("dirs.csv");
+    std::fs::write(&dirs, "x,y,z\n0.3,0.2,0.9\n-1,-1,-1\n").unwrap();
+    let out = stdout_of(envlight().arg("eval").arg(&map).arg("--dirs").arg(&dirs));
+    let rows = parse_rows(&out);
+    assert_eq!(rows.len(), 2);
+    assert!(rows.iter().all(|r| r[3] > 0.0 && r[4] > 0.0));
+}
+
+#[test]
+fn eval_errors_name_the_line() {
+    let dir = TempDir::new().unwrap();
+    let dirs = dir.path().join("dirs.csv");
+    for (input, needle) in [
+        (
+            "x,y,z\n1,0,0\n0,1,0\n0,0,0\n",
+            "dirs.csv:4: direction (0, 0, 0) has zero length",
+        ),
+        ("x,y,z\n1,0,0\n0,1\n", "dirs.csv:3: missing field z"),
+        (
+            "x,y,z\n1,0,0\n1,abc,0\n",
+            "dirs.csv:3: field y is not a number",
+        ),
+        ("x,y,z\n1,0,nan\n", "dirs.csv:2: field z is not finite"),
+        ("x,y,z\ninf,0,0\n", "dirs.csv:2: field x is not finite"),
+        ("x,y,z\n1,,0\n", "dirs.csv:2: field y is empty"),
+        ("x,y,w\n1,0,0\n", "dirs.csv:1: header has no column named z"),
+        (
+            "x,y,z,x\n1,0,0,1\n",
+            "dirs.csv:1: header names column x twice",
+        ),
+        ("", "dirs.csv: empty input"),
+    ] {
+        std::fs::write(&dirs, input).unwrap();
+        assert_error(envlight().arg("eval").arg("--dirs").arg(&dirs), needle);
+    }
+    // From stdin the source is called <stdin>.
+    assert_error(
+        envlight()
+            .args(["eval", "--dirs", "-"])
+            .write_stdin("x,y,z\n0,0,0\n"),
+        "<stdin>:2: direction (0, 0, 0) has zero length",
+    );
+}
+
+#[test]
+fn eval_streams_many_rows_in_order() {
+    // More rows than one batch of the streaming reader.
+    let n = 70_000;
+    let mut input = String::from("x,y,z\n");
+    for k in 0..n {
+        let a = k as f64 * 0.001;
+        input.push_str(&format!(
+            "{},{},{}\n",
+            a.cos(),
+            a.sin(),
+            (k % 7) as f64 * 0.1 - 0.3
+        ));
+    }
+    let out = stdout_of(envlight().args(["eval", "--dirs", "-"]).write_stdin(input));
+    let rows = parse_rows(&out);
+    assert_eq!(rows.len(), n);
+    for (k, r) in rows.iter().enumerate().step_by(997) {
+        let a = k as f64 * 0.001;
+        let z = (k % 7) as f64 * 0.1 - 0.3;
+        let len = (1.0 + z * z).sqrt();
+        assert!(
+            (r[0] - a.cos() / len).abs() < 1e-6 && (r[2] - z / len).abs() < 1e-6,
+            "row {k}: {r:?}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------- importance
+
+fn check_png(path: &Path, min_width: u32) {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let img = image::load_from_memory(&bytes).unwrap();
+    assert!(
+        img.width() >= min_width && img.height() >= min_width / 2,
+        "{}x{}",
+        img.width(),
+        img.height()
+    );
+}
+
+#[test]
+fn importance_writes_a_png_on_builtin_sky() {
+    let dir = TempDir::new().unwrap();
+    let png = dir.path().join("imp.png");
+    envlight()
+        .args(["importance", "--samples", "300", "--width", "256", "-o"])
+        .arg(&png)
+        .assert()
+        .success()
+        .stdout("");
+    check_png(&png, 256);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn importance_upsamples_a_tiny_pfm_and_rotates() {
+    let (dir, map) = pfm_dir();
+    let png = dir.path().join("imp.png");
+    envlight()
+        .arg("importance")
+        .arg(&map)
+        .args(["--samples", "50", "--width", "128", "--rotate", "-45", "-o"])
+        .arg(&png)
+        .assert()
+        .success();
+    check_png(&png, 128);
+}
+
+#[test]
+fn importance_needs_an_output_and_a_sane_width() {
+    envlight().arg("importance").assert().code(2);
+    envlight()
+        .args(["importance", "-o", "x.png", "--width", "3"])
+        .assert()
+        .code(2);
+}
+
+// ---------------------------------------------------------------- verify
+
+fn verify(args: &[&str]) -> (i32, String) {
+    let out = envlight().arg("verify").args(args).output().unwrap();
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    (out.status.code().unwrap(), stdout)
+}
+
+#[test]
+fn verify_passes_on_builtin_sky() {
+    let (code, table) = verify(&["--samples", "40000", "--seed", "1"]);
+    assert_eq!(code, 0, "{table}");
+    let header: Vec<&str> = table
+        .lines()
+        .next()
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect();
+    assert_eq!(header, ["check", "value", "threshold", "result"]);
+    for check in [
+        "normalisation",
+        "pdf consistency",
+        "invert",
+        "chi-square",
+        "unbiased (Y)",
+        "unbiased (cos)",
+        "support",
+        "efficiency",
+    ] {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with(check))
+            .unwrap_or_else(|| panic!("no {check} row in {table}"));
+        let result = row.rsplit('|').next().unwrap().trim();
+        assert!(
+            result == "pass" || (check == "efficiency" && result == "info"),
+            "{row}"
+        );
+    }
+    assert!(table.contains("all checks passed"), "{table}");
+}
+
+#[test]
+fn verify_passes_on_small_pfm_with_options() {
+    let (_dir, map) = pfm_dir();
+    let m = map.to_str().unwrap();
+    for extra in [
+        &[][..],
+        &["--lookup", "nearest"][..],
+        &["--rotate", "100", "--scale", "3"][..],
+    ] {
+        let mut args = vec![m, "--samples", "20000"];
+        args.extend_from_slice(extra);
+        let (code, table) = verify(&args);
+        assert_eq!(code, 0, "{extra:?}\n{table}");
+    }
+}
+
+#[test]
+fn verify_passes_on_a_real_map() {
+    let Some(dir) = envmaps() else { return };
+    let map = dir.join("sunrise.exr");
+    if !map.exists() {
+        eprintln!("skipped: {} not found", map.display());
+        return;
+    }
+    let (code, table) = verify(&[map.to_str().unwrap(), "--samples", "50000"]);
+    assert_eq!(code, 0, "{table}");
+}
+
+// ---------------------------------------------------------------- bad input
+
+#[test]
+fn missing_file_is_an_error_naming_it() {
+    for cmd in ["info", "verify"] {
+        assert_error(envlight().args([cmd, "no/such/map.exr"]), "no/such/map.exr");
+    }
+    assert_error(
+        envlight().args(["sample", "no/such/map.hdr", "-n", "1"]),
+        "no/such/map.hdr",
+    );
+    assert_error(
+        envlight().args(["eval", "--dirs", "no/such/dirs.csv"]),
+        "no/such/dirs.csv",
+    );
+    assert_error(envlight().args(["info", "builtin:nope"]), "builtin:nope");
+}
+
+#[test]
+fn garbage_bytes_are_an_error_naming_the_file() {
+    let dir = TempDir::new().unwrap();
+    let mut junk = Vec::new();
+    let mut state = 0x1234_5678u32;
+    for _ in 0..4096 {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        junk.push((state >> 24) as u8);
+    }
+    for name in ["junk.hdr", "junk.exr", "junk.pfm", "empty.hdr"] {
+        let path = dir.path().join(name);
+        std::fs::write(
+            &path,
+            if name.starts_with("empty") {
+                &[][..]
+            } else {
+                &junk[..]
+            },
+        )
+        .unwrap();
+        assert_error(envlight().arg("info").arg(&path), name);
+    }
+    // Right magic, broken body.
+    let path = dir.path().join("cut.hdr");
+    std::fs::write(
+        &path,
+        "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 10 +X 20\n\x02\x02",
+    )
+    .unwrap();
+    assert_error(envlight().arg("info").arg(&path), "cut.hdr");
+    let path = dir.path().join("cut.pfm");
+    std::fs::write(&path, "PF\n4 4\n-1.0\n\0\0\0\0").unwrap();
+    assert_error(envlight().arg("info").arg(&path), "cut.pfm");
+}
+
+#[test]
+fn truncated_real_maps_are_errors_naming_the_file() {
+    let Some(src) = envmaps() else { return };
+    let dir = TempDir::new().unwrap();
+    for name in ["sunrise.exr", "colorful_studio_2k.hdr"] {
+        let Ok(bytes) = std::fs::read(src.join(name)) else {
+            eprintln!("skipped: {name} not found");
+            continue;
+        };
+        for fraction in [0.1, 0.5, 0.9] {
+            let path = dir.path().join(format!("cut-{fraction}-{name}"));
+            std::fs::write(&path, &bytes[..(bytes.len() as f64 * fraction) as usize]).unwrap();
+            assert_error(
+                envlight().arg("info").arg(&path),
+                &format!("cut-{fraction}-{name}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn non_finite_texels_are_errors_naming_the_texel() {
+    let dir = TempDir::new().unwrap();
+    for (name, bad) in [
+        ("nan.pfm", f32::NAN),
+        ("inf.pfm", f32::INFINITY),
+        ("ninf.pfm", f32::NEG_INFINITY),
+    ] {
+        let path = dir.path().join(name);
+        write_pfm(&path, 6, 3, |x, y| {
+            if (x, y) == (4, 1) {
+                [1.0, bad, 1.0]
+            } else {
+                [1.0; 3]
+            }
+        });
+        let stderr = assert_error(envlight().arg("info").arg(&path), name);
+        assert!(stderr.contains("(4, 1)"), "{stderr}");
+        assert_error(envlight().args(["sample", "-n", "1"]).arg(&path), "(4, 1)");
+        // --sanitize replaces it, with a warning that counts it.
+        envlight()
+            .args(["sample", "-n", "10", "--sanitize"])
+            .arg(&path)
+            .assert()
+            .success()
+            .stderr(
+                predicate::str::contains("warning:")
+                    .and(predicate::str::contains("replaced 1 texels")),
+            );
+    }
+}
+
+#[test]
+fn negative_texels_are_clamped_with_a_warning() {
+    let dir = TempDir::new().unwrap();
+    let path = dir.path().join("neg.pfm");
+    write_pfm(&path, 8, 4, |x, y| match (x, y) {
+        (1, 1) => [-0.5, 1.0, 1.0],
+        (2, 2) => [1.0, -0.25, -2.0],
+        (7, 3) => [-1e-4, 0.0, 0.0],
+        _ => [1.0; 3],
+    });
+    let out = envlight()
+        .args(["info", "--json"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.starts_with("warning:"), "{stderr}");
+    assert!(
+        stderr.contains("3 texels") && stderr.contains("-2"),
+        "{stderr}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["negative_texels"], 3);
+    let (code, table) = verify(&[path.to_str().unwrap(), "--samples", "5000"]);
+    assert_eq!(code, 0, "{table}");
+}
+
+#[test]
+fn bad_usage_exits_with_2() {
+    for args in [
+        &[][..],
+        &["frobnicate"][..],
+        &["sample"][..],
+        &["sample", "-n", "many"][..],
+        &["sample", "-n", "5", "--scale", "-1"][..],
+        &["sample", "-n", "5", "--rotate", "nan"][..],
+        &["sample", "-n", "5", "--lookup", "cubic"][..],
+        &["eval"][..],
+        &["info", "--bogus"][..],
+        &["verify", "--samples", "10"][..],
+    ] {
+        let out = envlight().args(args).output().unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.stdout.is_empty());
+    }
+}
+
+#[test]
+fn help_explains_the_conventions() {
+    for cmd in ["info", "sample", "eval", "importance", "verify"] {
+        let text = stdout_of(envlight().args([cmd, "--help"]));
+        assert!(text.contains("z up"), "{cmd}: {text}");
+        assert!(
+            text.contains("φ = 2π u") && text.contains("θ = π v"),
+            "{cmd}: {text}"
+        );
+    }
+    let text = stdout_of(envlight().args(["sample", "--help"]));
+    assert!(text.contains(HEADER));
+}
+
+// ---------------------------------------------------------------- degenerate maps
+
+#[test]
+fn all_black_map_gives_pdf_zero_rows_and_a_warning() {
+    let dir = TempDir::new().unwrap();
+    let path = dir.path().join("black.pfm");
+    write_pfm(&path, 8, 4, |_, _| [0.0; 3]);
+    let out = envlight()
+        .args(["sample", "-n", "200"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("warning:") && stderr.contains("black"),
+        "{stderr}"
+    );
+    let rows = parse_rows(&String::from_utf8(out.stdout).unwrap());
+    assert_eq!(rows.len(), 200);
+    for r in &rows {
+        assert_eq!(&r[3..], &[0.0; 4], "{r:?}");
+        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        assert!((len - 1.0).abs() < 1e-6, "{r:?}");
+    }
+    // Every other command copes too.
+    let v = info_json(&[path.to_str().unwrap()]);
+    assert_eq!(v["efficiency"], 0.0);
+    assert_eq!(v["black"], true);
+    let evaluated = stdout_of(
+        envlight()
+            .arg("eval")
+            .arg(&path)
+            .args(["--dirs", "-"])
+            .write_stdin("x,y,z\n0,0,1\n"),
+    );
+    assert_eq!(parse_rows(&evaluated)[0][3..], [0.0; 4]);
+    let (code, table) = verify(&[path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{table}");
+    assert!(table.contains("skip"));
+    let png = dir.path().join("black.png");
+    envlight()
+        .arg("importance")
+        .arg(&path)
+        .args(["--samples", "10", "-o"])
+        .arg(&png)
+        .assert()
+        .success();
+    check_png(&png, 64);
+}
+
+#[test]
+fn one_texel_and_one_hot_texel_maps_work() {
+    let dir = TempDir::new().unwrap();
+    let one = dir.path().join("one.pfm");
+    write_pfm(&one, 1, 1, |_, _| [2.0, 1.0, 0.5]);
+    let hot = dir.path().join("hot.pfm");
+    write_pfm(&hot, 32, 16, |x, y| {
+        if (x, y) == (31, 0) {
+            [1e4; 3]
+        } else {
+            [0.0; 3]
+        }
+    });
+    for map in [&one, &hot] {
+        let m = map.to_str().unwrap();
+        info_json(&[m]);
+        let rows = parse_rows(&stdout_of(envlight().args(["sample", m, "-n", "2000"])));
+        assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())));
+        let (code, table) = verify(&[m, "--samples", "5000"]);
+        assert_eq!(code, 0, "{m}\n{table}");
+        let png = dir.path().join("x.png");
+        envlight()
+            .args(["importance", m, "--width", "64", "--samples", "20", "-o"])
+            .arg(&png)
+            .assert()
+            .success();
+    }
+}
+
+// ---------------------------------------------------------------- output
+
+#[test]
+fn a_failing_command_leaves_an_existing_output_untouched() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out.csv");
+    std::fs::write(&out, "precious\n").unwrap();
+    let dirs = dir.path().join("dirs.csv");
+    // The bad row comes after enough good rows that output has been written.
+    let mut input = String::from("x,y,z\n");
+    for _ in 0..100_000 {
+        input.push_str("0.1,0.2,0.3\n");
+    }
+    input.push_str("0,0,0\n");
+    std::fs::write(&dirs, input).unwrap();
+    assert_error(
+        envlight()
+            .args(["eval", "--dirs"])
+            .arg(&dirs)
+            .arg("-o")
+            .arg(&out),
+        "dirs.csv:100002:",
+    );
+    assert_error(
+        envlight()
+            .args(["sample", "missing.exr", "-n", "5", "-o"])
+            .arg(&out),
+        "missing.exr",
+    );
+    assert_error(
+        envlight()
+            .args(["importance", "missing.exr", "-o"])
+            .arg(&out),
+        "missing.exr",
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "precious\n");
+    // No temporary files left behind.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+    // And a new output that fails is never created.
+    let fresh = dir.path().join("fresh.csv");
+    assert_error(
+        envlight()
+            .args(["eval", "--dirs"])
+            .arg(&dirs)
+            .arg("-o")
+            .arg(&fresh),
+        "dirs.csv",
+    );
+    assert!(!fresh.exists());
+}
+
+#[test]
+fn output_into_a_missing_directory_is_an_error_naming_it() {
+    assert_error(
+        envlight().args(["sample", "-n", "1", "-o", "no/such/dir/s.csv"]),
+        "no/such/dir/s.csv",
+    );
+}
+
+#[test]
+fn a_closed_pipe_ends_quietly() {
+    let bin = assert_cmd::cargo::cargo_bin("envlight");
+    for args in [
+        &["sample", "-n", "1000000"][..],
+        &["eval", "--dirs", "-"][..],
+    ] {
+        let mut child = std::process::Command::new(&bin)
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let feeder = std::thread::spawn(move || {
+            use std::io::Write;
+            let mut stdin = stdin;
+            let _ = stdin.write_all(b"x,y,z\n");
+            for _ in 0..200_000 {
+                if stdin.write_all(b"0.1,0.2,0.3\n").is_err() {
+                    break;
+                }
+            }
+        });
+        let mut reader = BufReader::new(child.stdout.take().unwrap());
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        assert_eq!(line, "x,y,z,pdf,r,g,b\n");
+        drop(reader);
+        let mut stderr = String::new();
+        child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut stderr)
+            .unwrap();
+        let status = child.wait().unwrap();
+        let _ = feeder.join();
+        assert_eq!(status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(
+            !stderr.contains("panicked") && !stderr.contains("error"),
+            "{stderr}"
+        );
+    }
+}

@@ -1,0 +1,194 @@
+//! The path tracer: unidirectional paths with next-event estimation towards the
+//! environment light, BSDF-sampled continuation and Russian roulette, with the light
+//! estimated by one of the [`Strategy`] techniques at every vertex.
+
+use crate::geometry::{Frame, Ray};
+use crate::rgb::{add, is_black, max_component, mul, scale, Rgb};
+use crate::scene::Scene;
+use crate::strategy::{CompensatedLight, Strategy};
+use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
+use envlight::rng::SplitMix64;
+use envlight::{EnvironmentLight, Vec3};
+
+/// Bounces after which Russian roulette starts.
+pub const ROULETTE_DEPTH: u32 = 3;
+
+/// Estimates the radiance arriving along camera rays.
+///
+/// `Send + Sync`; [`Integrator::li`] allocates nothing.
+#[derive(Debug, Clone)]
+pub struct Integrator<'a> {
+    scene: &'a Scene,
+    light: &'a EnvironmentLight,
+    strategy: Strategy,
+    max_depth: u32,
+    compensated: Option<CompensatedLight<'a>>,
+}
+
+/// The power heuristic (β = 2) weight of a technique with density `a` against one
+/// with density `b`.
+#[inline]
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+impl<'a> Integrator<'a> {
+    /// An integrator for `scene` under `light`. `max_depth` is the largest number of
+    /// surface interactions on a path (1 = direct lighting only; 0 renders only what
+    /// camera rays see directly: the environment, black objects). Builds the
+    /// compensated distribution when `strategy` needs it.
+    pub fn new(
+        scene: &'a Scene,
+        light: &'a EnvironmentLight,
+        strategy: Strategy,
+        max_depth: u32,
+    ) -> Self {
+        let compensated =
+            (strategy == Strategy::MisCompensated).then(|| CompensatedLight::new(light));
+        Self {
+            scene,
+            light,
+            strategy,
+            max_depth,
+            compensated,
+        }
+    }
+
+    /// The strategy in use.
+    pub fn strategy(&self) -> Strategy {
+        self.strategy
+    }
+
+    /// Density of the light-sampling technique at world direction `d` (0 for
+    /// strategies without one).
+    #[inline]
+    fn light_technique_pdf(&self, d: Vec3) -> f32 {
+        match (&self.compensated, self.strategy) {
+            (Some(c), _) => c.pdf(d),
+            (None, Strategy::Mis | Strategy::Light) => self.light.pdf(d),
+            (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
+            (None, _) => 0.0,
+        }
+    }
+
+    /// One light-sampled direction: `(direction, pdf, radiance)`.
+    #[inline]
+    fn sample_light_technique(&self, xi: [f32; 2]) -> Option<(Vec3, f32, Rgb)> {
+        match self.strategy {
+            Strategy::Bsdf => None,
+            Strategy::Uniform => {
+                let d = square_to_uniform_sphere(xi);
+                Some((d, UNIFORM_SPHERE_PDF, self.light.radiance(d)))
+            }
+            Strategy::Light | Strategy::Mis => self
+                .light
+                .sample(xi)
+                .map(|s| (s.direction, s.pdf, s.radiance)),
+            Strategy::MisCompensated => self
+                .compensated
+                .as_ref()
+                .and_then(|c| c.sample(xi))
+                .map(|s| (s.direction, s.pdf, s.radiance)),
+        }
+    }
+
+    /// One sample of the radiance arriving at the camera along `ray` (linear RGB).
+    ///
+    /// Consumes random numbers from `rng` only; the result is a pure function of
+    /// the ray and the generator's state.
+    pub fn li(&self, ray: &Ray, rng: &mut SplitMix64) -> Rgb {
+        let mis = matches!(self.strategy, Strategy::Mis | Strategy::MisCompensated);
+        let Some(mut hit) = self.scene.intersect(ray, f32::INFINITY) else {
+            return self.light.radiance(ray.direction);
+        };
+        let mut ray = *ray;
+        let mut radiance = [0.0f32; 3];
+        let mut throughput = [1.0f32; 3];
+        let mut depth = 1u32;
+        while depth <= self.max_depth {
+            let bsdf = self.scene.objects[hit.object].material.bsdf_at(hit.point);
+            // Both-sided shading: the normal faces the viewer.
+            let normal = if hit.normal.dot(ray.direction) > 0.0 {
+                -hit.normal
+            } else {
+                hit.normal
+            };
+            let frame = Frame::from_normal(normal);
+            let wo = frame.to_local(-ray.direction);
+            if wo.z <= 0.0 {
+                break;
+            }
+
+            // Next-event estimation: a direction from the light technique, weighted
+            // against the BSDF technique when combining.
+            let xi_light = [rng.next_f32(), rng.next_f32()];
+            if let Some((wi_world, light_pdf, le)) = self.sample_light_technique(xi_light) {
+                let wi = frame.to_local(wi_world);
+                if wi.z > 0.0 && !is_black(le) {
+                    let f = bsdf.eval(wo, wi);
+                    if !is_black(f)
+                        && !self
+                            .scene
+                            .occluded(&Ray::spawn(hit.point, normal, wi_world))
+                    {
+                        let weight = if mis {
+                            power_heuristic(light_pdf, bsdf.pdf(wo, wi))
+                        } else {
+                            1.0
+                        };
+                        let c = scale(mul(f, le), wi.z * weight / light_pdf);
+                        radiance = add(radiance, mul(throughput, c));
+                    }
+                }
+            }
+
+            // Continue the path by sampling the BSDF. At the last vertex this ray
+            // only matters when it may escape to the light with a non-zero weight.
+            if depth == self.max_depth && !self.strategy.counts_escaped_bsdf_rays() {
+                break;
+            }
+            let uc = rng.next_f32();
+            let u = [rng.next_f32(), rng.next_f32()];
+            let Some(bs) = bsdf.sample(wo, uc, u) else {
+                break;
+            };
+            throughput = mul(throughput, scale(bs.f, bs.wi.z / bs.pdf));
+            if is_black(throughput) {
+                break;
+            }
+            if depth >= ROULETTE_DEPTH {
+                let survive = max_component(throughput).min(0.95);
+                if rng.next_f32() >= survive {
+                    break;
+                }
+                throughput = scale(throughput, 1.0 / survive);
+            }
+            let wi_world = frame.to_world(bs.wi);
+            ray = Ray::spawn(hit.point, normal, wi_world);
+            match self.scene.intersect(&ray, f32::INFINITY) {
+                None => {
+                    if self.strategy.counts_escaped_bsdf_rays() {
+                        let weight = if mis {
+                            power_heuristic(bs.pdf, self.light_technique_pdf(wi_world))
+                        } else {
+                            1.0
+                        };
+                        let le = self.light.radiance(wi_world);
+                        radiance = add(radiance, scale(mul(throughput, le), weight));
+                    }
+                    break;
+                }
+                Some(next) => {
+                    hit = next;
+                    depth += 1;
+                }
+            }
+        }
+        radiance
+    }
+}

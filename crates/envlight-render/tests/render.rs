@@ -1,0 +1,183 @@
+//! Whole-image properties: determinism, time-budgeted renders, agreement of all
+//! strategies on a scene with occlusion and several bounces, and the comparison.
+
+#![allow(clippy::needless_range_loop)] // per-channel arithmetic reads best indexed
+
+use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Rotation};
+use envlight_render::{
+    compare, render, render_for_time, render_with_error, Budget, CompareSettings, NoProgress,
+    RenderSettings, Scene, Strategy,
+};
+
+fn sky_light() -> EnvironmentLight {
+    EnvironmentLight::new(builtin::sky(128, 64), LightOptions::default()).unwrap()
+}
+
+/// A soft map: gradient sky, ground, and a patch 20× the sky, so that even uniform
+/// sampling has a trustworthy error estimate.
+fn soft_light() -> EnvironmentLight {
+    let image = EnvImage::from_fn(64, 32, |x, y| {
+        let (u, v) = ((x as f32 + 0.5) / 64.0, (y as f32 + 0.5) / 32.0);
+        if (0.55..0.62).contains(&u) && (0.3..0.4).contains(&v) {
+            [20.0, 18.0, 14.0]
+        } else if v < 0.5 {
+            [0.5, 0.6, 0.9]
+        } else {
+            [0.2, 0.18, 0.15]
+        }
+    })
+    .unwrap();
+    let options = LightOptions {
+        rotation: Rotation::about_z_degrees(30.0),
+        ..Default::default()
+    };
+    EnvironmentLight::new(image, options).unwrap()
+}
+
+#[test]
+fn same_image_for_any_thread_count() {
+    let light = sky_light();
+    let scene = Scene::builtin("balls").unwrap();
+    for strategy in [Strategy::Mis, Strategy::MisCompensated] {
+        let settings = RenderSettings {
+            width: 40,
+            height: 24,
+            spp: 3,
+            max_depth: 6,
+            strategy,
+            seed: 42,
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| render(&scene, &light, &settings, &NoProgress))
+        };
+        let one = run(1);
+        assert_eq!(one, run(3), "{strategy}");
+        assert!(one
+            .pixels()
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite() && *c >= 0.0)));
+        // Another seed gives another image.
+        let other = render(
+            &scene,
+            &light,
+            &RenderSettings {
+                seed: 43,
+                ..settings
+            },
+            &NoProgress,
+        );
+        assert_ne!(one, other);
+    }
+}
+
+#[test]
+fn time_budget_render_equals_sample_count_render() {
+    let light = sky_light();
+    let scene = Scene::builtin("balls").unwrap();
+    let settings = RenderSettings {
+        width: 24,
+        height: 16,
+        spp: 5,
+        max_depth: 4,
+        strategy: Strategy::Mis,
+        seed: 1,
+    };
+    // A long budget stops at the cap of 5 samples; no budget at all still takes one.
+    let timed = render_for_time(&scene, &light, &settings, 60.0, &NoProgress);
+    assert_eq!(timed.spp, 5);
+    let fixed = render_with_error(&scene, &light, &settings, &NoProgress);
+    assert_eq!(timed.image, fixed.image);
+    assert_eq!(timed.std_error, fixed.std_error);
+    let minimal = render_for_time(&scene, &light, &settings, 0.0, &NoProgress);
+    assert_eq!(minimal.spp, 1);
+}
+
+/// On `balls` (occlusion, up to 6 bounces, all four materials) the mean over the
+/// image of every strategy agrees with `mis` within 5 combined standard errors.
+#[test]
+fn strategies_agree_on_balls() {
+    let light = soft_light();
+    let scene = Scene::builtin("balls").unwrap();
+    let mut means = Vec::new();
+    for strategy in Strategy::ALL {
+        let settings = RenderSettings {
+            width: 48,
+            height: 27,
+            spp: 96,
+            max_depth: 6,
+            strategy,
+            seed: 5,
+        };
+        let r = render_with_error(&scene, &light, &settings, &NoProgress);
+        let n = r.image.pixels().len() as f64;
+        let mut mean = [0.0f64; 3];
+        let mut var = [0.0f64; 3];
+        for (p, e) in r.image.pixels().iter().zip(r.std_error.pixels()) {
+            for c in 0..3 {
+                mean[c] += p[c] as f64 / n;
+                var[c] += (e[c] as f64 / n).powi(2);
+            }
+        }
+        let se = var.map(f64::sqrt);
+        eprintln!("{strategy:<16} {mean:.5?} ± {se:.6?}");
+        means.push((strategy, mean, se));
+    }
+    let mis = *means.iter().find(|m| m.0 == Strategy::Mis).unwrap();
+    for (strategy, mean, se) in &means {
+        for c in 0..3 {
+            let tol = 5.0 * (se[c].powi(2) + mis.2[c].powi(2)).sqrt();
+            assert!(
+                (mean[c] - mis.1[c]).abs() <= tol,
+                "{strategy} channel {c}: {} vs mis {} (tol {tol})",
+                mean[c],
+                mis.1[c]
+            );
+        }
+    }
+}
+
+#[test]
+fn comparison_reports_every_strategy_and_draws_a_sheet() {
+    let light = sky_light();
+    let scene = Scene::builtin("balls").unwrap();
+    let settings = CompareSettings {
+        render: RenderSettings {
+            width: 32,
+            height: 18,
+            spp: 2,
+            ..Default::default()
+        },
+        equal_time: Some(0.05),
+        reference_spp: 16,
+        ..Default::default()
+    };
+    let c = compare(&scene, &light, &settings, None, &NoProgress).unwrap();
+    assert_eq!(c.entries.len(), 10);
+    assert!(c.entries.iter().all(|e| e.rmse.is_finite() && e.rmse > 0.0));
+    assert!(c
+        .entries
+        .iter()
+        .filter(|e| matches!(e.budget, Budget::EqualTime(_)))
+        .all(|e| e.spp >= 1));
+    let table = c.table();
+    for s in Strategy::ALL {
+        assert!(table.contains(s.name()), "{table}");
+    }
+    let sheet = c.sheet(0.0);
+    assert_eq!(sheet.rgb.len(), 3 * sheet.width * sheet.height);
+    assert!(sheet.width > 6 * 32 && sheet.height > 2 * 18);
+    // A reference of the wrong size is an error, not a panic.
+    let wrong = envlight_render::Image::filled(8, 8, [0.0; 3]);
+    assert!(compare(
+        &scene,
+        &light,
+        &settings,
+        Some((wrong, "ref.exr".into())),
+        &NoProgress
+    )
+    .is_err());
+}
