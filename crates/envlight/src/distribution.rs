@@ -83,33 +83,23 @@ pub(crate) fn place_in_cell(cell: usize, frac: f32, n: usize) -> f32 {
 /// The largest `f32` below 1: continuous samples stay in `[0, 1)`.
 pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
-/// Fills `cdf` (length `f.len() + 1`) with the normalised CDF of `f` and returns the
-/// integral `Σ f / n` (0 when there is no positive mass: then `cdf` is uniform).
+/// Fills `cdf` (length `f.len() + 1`) with the normalised CDF of `f`, whose values
+/// must already be sanitised, and returns the integral `Σ f / n` (0 when there is no
+/// positive mass: then `cdf` is uniform).
 ///
-/// Non-finite or negative values count as 0, so nothing downstream can see a NaN.
+/// Two passes over `f` (total, then running sums), both in f64, so no scratch
+/// buffer is needed; the row is small enough to stay in cache between them.
 fn build_cdf(f: &[f32], cdf: &mut [f32]) -> f64 {
     let n = f.len();
     debug_assert_eq!(cdf.len(), n + 1);
-    let mut sums = Vec::with_capacity(n + 1);
-    let mut running = 0.0f64;
-    sums.push(0.0);
-    for &value in f {
-        running += sanitize(value) as f64;
-        sums.push(running);
-    }
-    fill_normalised(&sums, cdf);
-    running / n as f64
-}
-
-/// Normalises prefix sums `sums` (with `sums[0] == 0`) into `cdf`, or writes the
-/// uniform CDF when the total is not positive.
-fn fill_normalised(sums: &[f64], cdf: &mut [f32]) {
-    let n = sums.len() - 1;
-    let total = sums[n];
+    let total: f64 = f.iter().map(|&v| v as f64).sum();
     if total > 0.0 && total.is_finite() {
         let inv = 1.0 / total;
-        for (c, &s) in cdf.iter_mut().zip(sums) {
-            *c = (s * inv) as f32;
+        let mut running = 0.0f64;
+        cdf[0] = 0.0;
+        for (c, &v) in cdf[1..].iter_mut().zip(f) {
+            running += v as f64;
+            *c = (running * inv) as f32;
         }
     } else {
         for (i, c) in cdf.iter_mut().enumerate() {
@@ -117,6 +107,7 @@ fn fill_normalised(sums: &[f64], cdf: &mut [f32]) {
         }
     }
     cdf[n] = 1.0;
+    total / n as f64
 }
 
 /// A value usable as a density: finite and positive, otherwise 0.
@@ -331,37 +322,53 @@ impl Distribution2D {
     /// # Panics
     /// When `nu == 0` or `nv == 0`.
     pub fn from_rows(nu: usize, nv: usize, fill_row: impl Fn(usize, &mut [f32]) + Sync) -> Self {
+        Self::from_rows_with(nu, nv, || (), |_, v, row| fill_row(v, row)).0
+    }
+
+    /// [`Self::from_rows`] with per-task state and a per-row result. Rows are handed
+    /// out in contiguous blocks, in increasing order within a block, each block with
+    /// its own state from `init` (so a fill can cache work shared by neighbouring
+    /// rows). `fill_row` must give each row the same values whatever the blocks are;
+    /// then the distribution, and the results (returned in row order), do not depend
+    /// on the number of threads.
+    ///
+    /// # Panics
+    /// When `nu == 0` or `nv == 0`.
+    pub fn from_rows_with<S, T: Send + Default + Clone>(
+        nu: usize,
+        nv: usize,
+        init: impl Fn() -> S + Sync,
+        fill_row: impl Fn(&mut S, usize, &mut [f32]) -> T + Sync,
+    ) -> (Self, Vec<T>) {
         use rayon::prelude::*;
         assert!(nu > 0 && nv > 0, "bad 2D grid shape");
         let mut func = vec![0.0f32; nu * nv];
         let mut conditional_cdf = vec![0.0f32; (nu + 1) * nv];
         let mut row_integral = vec![0.0f64; nv];
-        // Big rows alone are worth a task; tiny ones are grouped so scheduling
-        // does not dominate.
-        let rows_per_task = (4096 / nu).max(1);
+        let mut results = vec![T::default(); nv];
+        // Enough blocks to balance the load, each big enough that per-block work
+        // (state set-up, scheduling) costs little next to its rows.
+        let blocks = (rayon::current_num_threads() * 8).max(1);
+        let rows_per_task = nv.div_ceil(blocks).max((4096 / nu).max(1));
         func.par_chunks_mut(nu * rows_per_task)
             .zip(conditional_cdf.par_chunks_mut((nu + 1) * rows_per_task))
             .zip(row_integral.par_chunks_mut(rows_per_task))
+            .zip(results.par_chunks_mut(rows_per_task))
             .enumerate()
-            .for_each(|(task, ((funcs, cdfs), integrals))| {
-                let mut sums = Vec::with_capacity(nu + 1);
-                for (k, ((row, cdf), integral)) in funcs
+            .for_each(|(task, (((funcs, cdfs), integrals), outs))| {
+                let mut state = init();
+                for (k, (((row, cdf), integral), out)) in funcs
                     .chunks_mut(nu)
                     .zip(cdfs.chunks_mut(nu + 1))
                     .zip(integrals.iter_mut())
+                    .zip(outs.iter_mut())
                     .enumerate()
                 {
-                    fill_row(task * rows_per_task + k, row);
-                    sums.clear();
-                    sums.push(0.0f64);
-                    let mut running = 0.0f64;
+                    *out = fill_row(&mut state, task * rows_per_task + k, row);
                     for value in row.iter_mut() {
                         *value = sanitize(*value);
-                        running += *value as f64;
-                        sums.push(running);
                     }
-                    fill_normalised(&sums, cdf);
-                    *integral = running / nu as f64;
+                    *integral = build_cdf(row, cdf);
                 }
             });
         let marginal_func: Vec<f32> = row_integral.iter().map(|&i| i as f32).collect();
@@ -369,14 +376,17 @@ impl Distribution2D {
         // The marginal's integral is the 2D integral; keep it in full precision
         // (the f32 row integrals only shape the marginal CDF).
         marginal.integral = row_integral.iter().sum::<f64>() / nv as f64;
-        Self {
-            nu,
-            nv,
-            func,
-            conditional_cdf,
-            row_integral,
-            marginal,
-        }
+        (
+            Self {
+                nu,
+                nv,
+                func,
+                conditional_cdf,
+                row_integral,
+                marginal,
+            },
+            results,
+        )
     }
 
     /// Grid width (cells along u).

@@ -92,8 +92,7 @@ impl EnvironmentLight {
                 options.scale
             )));
         }
-        let distribution = build_distribution(&image, options.lookup);
-        let integral_rgb = integrate_radiance(&image, options.lookup);
+        let (distribution, integral_rgb) = build_importance(&image, options.lookup);
         Ok(Self {
             world_to_light: options.rotation.inverse(),
             image,
@@ -277,7 +276,13 @@ impl EnvironmentLight {
             .enumerate()
             .reduce(
                 || (0, f32::NEG_INFINITY),
-                |a, b| if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) { b } else { a },
+                |a, b| {
+                    if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
+                        b
+                    } else {
+                        a
+                    }
+                },
             );
         let uv = [
             ((index % w) as f32 + 0.5) / w as f32,
@@ -307,7 +312,12 @@ impl EnvironmentLight {
         let (w, h) = (self.image.width(), self.image.height());
         // Gauss-Legendre 2-point nodes on [0, 1], inside each quarter texel.
         let g = 0.5 / 3f64.sqrt();
-        let nodes = [0.25 - 0.5 * g, 0.25 + 0.5 * g, 0.75 - 0.5 * g, 0.75 + 0.5 * g];
+        let nodes = [
+            0.25 - 0.5 * g,
+            0.25 + 0.5 * g,
+            0.75 - 0.5 * g,
+            0.75 + 0.5 * g,
+        ];
         let jac = EQUIRECT_JACOBIAN as f64;
         (0..h)
             .into_par_iter()
@@ -351,7 +361,11 @@ impl EnvironmentLight {
 /// Applies `f` element-wise from `input` to `out` in parallel chunks large enough
 /// that scheduling costs little next to the work.
 fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Sync) {
-    assert_eq!(input.len(), out.len(), "batch input and output lengths differ");
+    assert_eq!(
+        input.len(),
+        out.len(),
+        "batch input and output lengths differ"
+    );
     const CHUNK: usize = 4096;
     out.par_chunks_mut(CHUNK)
         .zip(input.par_chunks(CHUNK))
@@ -362,65 +376,106 @@ fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Syn
         });
 }
 
-/// The importance distribution of DESIGN.md §4 step 1.
-fn build_distribution(image: &EnvImage, lookup: Lookup) -> Distribution2D {
+/// The importance distribution of DESIGN.md §4 step 1 and `∫ L dω`, in one
+/// row-parallel pass over the texels.
+///
+/// Importance: `f[j][i] = Y(filtered) · sin θ_j`; for bilinear lookups the filter is
+/// the `[1 6 1]/8` blur in v (clamped) then u (wrapped), whose three input rows come
+/// from a rolling cache so each row's luminance is computed once per block.
+///
+/// Integral: along u, wrapped linear interpolation between texel centres integrates
+/// to the row mean, so `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle
+/// of row j's reconstruction weight ([`row_solid_angles`]); exact for either lookup.
+fn build_importance(image: &EnvImage, lookup: Lookup) -> (Distribution2D, [f64; 3]) {
     let (w, h) = (image.width(), image.height());
-    let luma: Vec<f32> = image.texels().par_iter().map(|&t| luminance(t)).collect();
-    let row = |j: usize| &luma[j * w..(j + 1) * w];
-    Distribution2D::from_rows(w, h, |j, out| {
-        let sin_theta = (std::f64::consts::PI * (j as f64 + 0.5) / h as f64).sin() as f32;
-        match lookup {
-            Lookup::Nearest => {
-                for (o, &y) in out.iter_mut().zip(row(j)) {
-                    *o = y * sin_theta;
+    let (distribution, row_sums) = Distribution2D::from_rows_with(
+        w,
+        h,
+        || LuminanceRows::new(w),
+        |cache, j, out| {
+            let sin_theta = (PI * (j as f64 + 0.5) / h as f64).sin() as f32;
+            match lookup {
+                Lookup::Nearest => {
+                    let (luma, _) = cache.row(image, j);
+                    for (o, &y) in out.iter_mut().zip(luma) {
+                        *o = y * sin_theta;
+                    }
+                }
+                Lookup::Bilinear => {
+                    // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal (wrapped).
+                    out.copy_from_slice(cache.row(image, j.saturating_sub(1)).0);
+                    for (o, &y) in out.iter_mut().zip(cache.row(image, (j + 1).min(h - 1)).0) {
+                        *o += y;
+                    }
+                    for (o, &y) in out.iter_mut().zip(cache.row(image, j).0) {
+                        *o = (*o + 6.0 * y) * 0.125;
+                    }
+                    let (first, last) = (out[0], out[w - 1]);
+                    let mut prev = last;
+                    for i in 0..w {
+                        let next = if i + 1 < w { out[i + 1] } else { first };
+                        let centre = out[i];
+                        out[i] = (prev + 6.0 * centre + next) * 0.125 * sin_theta;
+                        prev = centre;
+                    }
                 }
             }
-            Lookup::Bilinear => {
-                // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal (wrapped).
-                let (above, here, below) = (row(j.saturating_sub(1)), row(j), row((j + 1).min(h - 1)));
-                for i in 0..w {
-                    out[i] = (above[i] + 6.0 * here[i] + below[i]) * 0.125;
-                }
-                let (first, last) = (out[0], out[w - 1]);
-                let mut prev = last;
-                for i in 0..w {
-                    let next = if i + 1 < w { out[i + 1] } else { first };
-                    let centre = out[i];
-                    out[i] = (prev + 6.0 * centre + next) * 0.125 * sin_theta;
-                    prev = centre;
-                }
-            }
+            cache.row(image, j).1
+        },
+    );
+    let weights = row_solid_angles(h, lookup);
+    let mut integral = [0.0f64; 3];
+    for (sums, weight) in row_sums.iter().zip(&weights) {
+        for k in 0..3 {
+            integral[k] += sums[k] / w as f64 * weight;
         }
-    })
+    }
+    (distribution, integral)
 }
 
-/// `∫ L dω` for the image under `lookup`: `Σ_j W_j · mean_i L[j][i]`, where `W_j` is
-/// the solid angle covered by row `j`'s reconstruction weight.
-///
-/// Along u, wrapped linear interpolation between texel centres integrates to the
-/// row mean, so only the v weights need care. For nearest lookups `W_j` is the
-/// band's solid angle `2π (cos θ_j⁻ - cos θ_j⁺)`; for bilinear it is
-/// `2π² ∫ hat_j(v) sin(πv) dv` with the tent of row j (clamped at the poles),
-/// integrated per half texel by 4-point Gauss-Legendre (the integrand is smooth
-/// there).
-fn integrate_radiance(image: &EnvImage, lookup: Lookup) -> [f64; 3] {
-    let weights = row_solid_angles(image.height(), lookup);
-    let w = image.width() as f64;
-    (0..image.height())
-        .into_par_iter()
-        .map(|j| {
-            let mut sum = [0.0f64; 3];
-            for t in image.row(j) {
-                for k in 0..3 {
-                    sum[k] += t[k] as f64;
+/// The luminance of the last three image rows a build task asked for, with each
+/// row's RGB sums (f64), so the `[1 6 1]` filter computes every row's luminance once
+/// per block of rows instead of three times.
+struct LuminanceRows {
+    slots: [(usize, Vec<f32>, [f64; 3]); 3],
+}
+
+impl LuminanceRows {
+    fn new(w: usize) -> Self {
+        Self {
+            slots: std::array::from_fn(|_| (usize::MAX, vec![0.0; w], [0.0; 3])),
+        }
+    }
+
+    /// Luminance and RGB sums of row `j`, computed unless cached.
+    fn row(&mut self, image: &EnvImage, j: usize) -> (&[f32], [f64; 3]) {
+        let slot = match self.slots.iter().position(|s| s.0 == j) {
+            Some(slot) => slot,
+            None => {
+                // Rows are requested in increasing order: the lowest row is stale.
+                let slot = (0..3)
+                    .min_by_key(|&k| self.slots[k].0.wrapping_add(1))
+                    .unwrap_or(0);
+                let (id, luma, sums) = &mut self.slots[slot];
+                *id = j;
+                // Four partial sums per channel break the f64 add dependency chain.
+                let mut partial = [[0.0f64; 3]; 4];
+                for (k, (y, rgb)) in luma.iter_mut().zip(image.row(j)).enumerate() {
+                    *y = luminance(*rgb);
+                    let p = &mut partial[k & 3];
+                    p[0] += rgb[0] as f64;
+                    p[1] += rgb[1] as f64;
+                    p[2] += rgb[2] as f64;
                 }
+                *sums = std::array::from_fn(|c| {
+                    (partial[0][c] + partial[1][c]) + (partial[2][c] + partial[3][c])
+                });
+                slot
             }
-            sum.map(|s| s / w * weights[j])
-        })
-        .collect::<Vec<_>>()
-        .into_iter()
-        // Summed in row order so the result does not depend on the thread count.
-        .fold([0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
+        };
+        let (_, luma, sums) = &self.slots[slot];
+        (luma, *sums)
+    }
 }
 
 /// Solid angle `W_j` attributed to each row by `lookup` (they sum to 4π).
@@ -428,9 +483,7 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
     let hf = h as f64;
     match lookup {
         Lookup::Nearest => (0..h)
-            .map(|j| {
-                2.0 * PI * ((PI * j as f64 / hf).cos() - (PI * (j + 1) as f64 / hf).cos())
-            })
+            .map(|j| 2.0 * PI * ((PI * j as f64 / hf).cos() - (PI * (j + 1) as f64 / hf).cos()))
             .collect(),
         Lookup::Bilinear => {
             const GL_T: [f64; 4] = [
@@ -450,7 +503,10 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
                 let centre = (j as f64 + 0.5) / hf;
                 // Upper half: between the top edge of texel j and its centre, the
                 // neighbour is row j-1; lower half: row j+1 (clamped at the ends).
-                for (lo, neighbour) in [(j as f64 / hf, j.saturating_sub(1)), (centre, (j + 1).min(h - 1))] {
+                for (lo, neighbour) in [
+                    (j as f64 / hf, j.saturating_sub(1)),
+                    (centre, (j + 1).min(h - 1)),
+                ] {
                     let len = 0.5 / hf;
                     for (t, gw) in GL_T.iter().zip(GL_W) {
                         let v = lo + t * len;
@@ -475,7 +531,10 @@ mod tests {
         for lookup in [Lookup::Nearest, Lookup::Bilinear] {
             for h in [1, 2, 3, 17, 512] {
                 let total: f64 = row_solid_angles(h, lookup).iter().sum();
-                assert!((total / (4.0 * PI) - 1.0).abs() < 1e-7, "{lookup:?} h={h}: {total}");
+                assert!(
+                    (total / (4.0 * PI) - 1.0).abs() < 1e-7,
+                    "{lookup:?} h={h}: {total}"
+                );
             }
         }
     }
@@ -494,7 +553,10 @@ mod tests {
         // holds sin(4.5π/8) while the true sin θ is 1.
         let integral = 1.0 / (8.0 * (PI / 16.0).sin());
         let expected = (4.5 * PI / 8.0).sin() / (integral * 2.0 * PI * PI);
-        assert!((p as f64 / expected - 1.0).abs() < 1e-5, "{p} vs {expected}");
+        assert!(
+            (p as f64 / expected - 1.0).abs() < 1e-5,
+            "{p} vs {expected}"
+        );
         // Analytic: (4π)² / (I (2π²)² Σ_j ∫_row sin²(πv) dv / sin θ_j) = 0.9678449 for
         // h = 8 (the piecewise-constant sin θ is the only mismatch).
         let e = light.efficiency();
@@ -504,7 +566,8 @@ mod tests {
     #[test]
     fn rotation_moves_the_light() {
         // One bright column at u = 0 (+x); rotated by 90° it should sit at +y.
-        let image = EnvImage::from_fn(8, 4, |x, _| if x == 0 { [1.0; 3] } else { [0.0; 3] }).unwrap();
+        let image =
+            EnvImage::from_fn(8, 4, |x, _| if x == 0 { [1.0; 3] } else { [0.0; 3] }).unwrap();
         let options = LightOptions {
             rotation: Rotation::about_z_degrees(90.0),
             lookup: Lookup::Nearest,
@@ -532,7 +595,10 @@ mod tests {
     fn bad_scale_is_rejected() {
         let image = EnvImage::from_fn(1, 1, |_, _| [1.0; 3]).unwrap();
         for scale in [f32::NAN, -1.0, f32::INFINITY] {
-            let options = LightOptions { scale, ..Default::default() };
+            let options = LightOptions {
+                scale,
+                ..Default::default()
+            };
             assert!(EnvironmentLight::new(image.clone(), options).is_err());
         }
     }
