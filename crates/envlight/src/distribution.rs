@@ -110,6 +110,15 @@ fn build_cdf(f: &[f32], cdf: &mut [f32]) -> f64 {
     total / n as f64
 }
 
+/// `1 / x` for a positive integral, 0 otherwise (a zero function has pdf 0).
+fn inverse_or_zero(x: f64) -> f64 {
+    if x > 0.0 && x.is_finite() {
+        1.0 / x
+    } else {
+        0.0
+    }
+}
+
 /// A value usable as a density: finite and positive, otherwise 0.
 #[inline]
 fn sanitize(value: f32) -> f32 {
@@ -137,6 +146,8 @@ pub struct Distribution1D {
     func: Vec<f32>,
     cdf: Vec<f32>,
     integral: f64,
+    /// `1 / integral`, or 0 for a zero function.
+    inv_integral: f64,
 }
 
 /// A continuous sample of a 1D distribution.
@@ -175,6 +186,7 @@ impl Distribution1D {
             func,
             cdf,
             integral,
+            inv_integral: inverse_or_zero(integral),
         }
     }
 
@@ -216,11 +228,7 @@ impl Distribution1D {
 
     #[inline]
     fn cell_pdf(&self, cell: usize) -> f32 {
-        if self.integral > 0.0 {
-            (self.func[cell] as f64 / self.integral) as f32
-        } else {
-            0.0
-        }
+        (self.func[cell] as f64 * self.inv_integral) as f32
     }
 
     /// Maps `ξ ∈ [0, 1)` to `x` distributed with density `pdf`: finds the CDF segment
@@ -241,11 +249,7 @@ impl Distribution1D {
     pub fn sample_discrete(&self, xi: f32) -> DiscreteSample {
         let (index, remapped) = sample_segment(&self.cdf, xi);
         let n = self.func.len() as f64;
-        let probability = if self.integral > 0.0 {
-            (self.func[index] as f64 / (self.integral * n)) as f32
-        } else {
-            0.0
-        };
+        let probability = (self.func[index] as f64 * self.inv_integral / n) as f32;
         DiscreteSample {
             index,
             probability,
@@ -284,6 +288,8 @@ pub struct Distribution2D {
     /// Each row's integral `Σ_u f[v][u] / nu`.
     row_integral: Vec<f64>,
     marginal: Distribution1D,
+    /// `1 / I`, or 0 for a zero function (so pdfs come out 0, never NaN).
+    inv_integral: f64,
 }
 
 /// A continuous sample of a 2D distribution.
@@ -376,6 +382,7 @@ impl Distribution2D {
         // The marginal's integral is the 2D integral; keep it in full precision
         // (the f32 row integrals only shape the marginal CDF).
         marginal.integral = row_integral.iter().sum::<f64>() / nv as f64;
+        marginal.inv_integral = inverse_or_zero(marginal.integral);
         (
             Self {
                 nu,
@@ -383,6 +390,7 @@ impl Distribution2D {
                 func,
                 conditional_cdf,
                 row_integral,
+                inv_integral: marginal.inv_integral,
                 marginal,
             },
             results,
@@ -440,12 +448,7 @@ impl Distribution2D {
     /// Density of cell `[iu, iv]`: `f[iv][iu] / I`, 0 for a zero function.
     #[inline]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
-        let integral = self.marginal.integral;
-        if integral > 0.0 {
-            (self.func[iv * self.nu + iu] as f64 / integral) as f32
-        } else {
-            0.0
-        }
+        (self.func[iv * self.nu + iu] as f64 * self.inv_integral) as f32
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).

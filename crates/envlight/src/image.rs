@@ -4,6 +4,7 @@
 //! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
 
 use crate::error::{Error, Result, TexelPos};
+use crate::math::floor_fast;
 
 /// How radiance between texel centres is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -213,8 +214,8 @@ impl EnvImage {
 
     #[inline]
     fn nearest(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
-        let x = self.column((u * self.width as f32).floor(), wrap);
-        let y = clamp_index((v * self.height as f32).floor(), self.height);
+        let x = self.column(floor_fast(u * self.width as f32), wrap);
+        let y = clamp_index(floor_fast(v * self.height as f32), self.height);
         self.texel(x, y)
     }
 
@@ -222,7 +223,7 @@ impl EnvImage {
     fn bilinear(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
         let s = u * self.width as f32 - 0.5;
         let t = v * self.height as f32 - 0.5;
-        let (s0, t0) = (s.floor(), t.floor());
+        let (s0, t0) = (floor_fast(s), floor_fast(t));
         let (fs, ft) = (s - s0, t - t0);
         let x0 = self.column(s0, wrap);
         let x1 = match wrap {

@@ -29,10 +29,14 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod alias;
+pub mod bilinear;
 pub mod builtin;
 pub mod color;
 pub mod distribution;
+pub mod equal_area;
 pub mod error;
+pub mod hierarchical;
 pub mod image;
 pub mod light;
 pub mod load;

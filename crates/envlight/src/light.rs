@@ -73,6 +73,8 @@ pub struct EnvironmentLight {
     image: EnvImage,
     options: LightOptions,
     world_to_light: Rotation,
+    /// False for the identity rotation, which the hot paths then skip.
+    rotated: bool,
     distribution: Distribution2D,
     /// `∫ L dω` of the unscaled image, per channel.
     integral_rgb: [f64; 3],
@@ -95,6 +97,7 @@ impl EnvironmentLight {
         let (distribution, integral_rgb) = build_importance(&image, options.lookup);
         Ok(Self {
             world_to_light: options.rotation.inverse(),
+            rotated: !options.rotation.is_identity(),
             image,
             options,
             distribution,
@@ -124,19 +127,19 @@ impl EnvironmentLight {
 
     #[inline]
     fn to_world(&self, d: Vec3) -> Vec3 {
-        if self.options.rotation.is_identity() {
-            d
-        } else {
+        if self.rotated {
             self.options.rotation.apply(d)
+        } else {
+            d
         }
     }
 
     #[inline]
     fn to_light(&self, d: Vec3) -> Vec3 {
-        if self.options.rotation.is_identity() {
-            d
-        } else {
+        if self.rotated {
             self.world_to_light.apply(d)
+        } else {
+            d
         }
     }
 

@@ -78,7 +78,7 @@ impl ImageFormat {
         } else if bytes.starts_with(&EXR_MAGIC) {
             Some(ImageFormat::OpenExr)
         } else if (bytes.starts_with(b"PF") || bytes.starts_with(b"Pf"))
-            && bytes.get(2).map_or(true, |b| b.is_ascii_whitespace())
+            && bytes.get(2).is_none_or(|b| b.is_ascii_whitespace())
         {
             Some(ImageFormat::Pfm)
         } else if bytes.starts_with(&PNG_MAGIC) {
@@ -1022,8 +1022,8 @@ fn decode_exr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
             }
             let (x0, y0) = (index.pixel_position.0, index.pixel_position.1);
             let (bw, bh) = (index.pixel_size.0, index.pixel_size.1);
-            if x0.checked_add(bw).map_or(true, |e| e > width)
-                || y0.checked_add(bh).map_or(true, |e| e > height)
+            if x0.checked_add(bw).is_none_or(|e| e > width)
+                || y0.checked_add(bh).is_none_or(|e| e > height)
             {
                 return Err(ctx.decode_error(format!(
                     "a block of {bw}x{bh} texels at ({x0}, {y0}) lies outside the \

@@ -9,7 +9,7 @@
 //! So the top row looks at +z, `u = 0` at +x and `u = 0.25` at +y.
 
 use crate::distribution::ONE_MINUS_EPSILON;
-use crate::math::Vec3;
+use crate::math::{atan2_fast, Vec3};
 use std::f32::consts::PI;
 
 /// `dω / (du dv) = 2π² sin θ`: this constant times `sin θ`.
@@ -35,8 +35,8 @@ pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
 /// to about 3·10⁻⁴ rad (a twentieth of a texel on a 512-row map).
 #[inline]
 pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
-    let theta = (d.x * d.x + d.y * d.y).sqrt().atan2(d.z);
-    let mut phi = d.y.atan2(d.x);
+    let theta = atan2_fast((d.x * d.x + d.y * d.y).sqrt(), d.z);
+    let mut phi = atan2_fast(d.y, d.x);
     if phi < 0.0 {
         phi += 2.0 * PI;
     }
