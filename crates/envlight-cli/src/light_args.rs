@@ -6,9 +6,11 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Context};
 use clap::ValueEnum;
+use envlight::light::{Density, Mapping, Sampler};
 use envlight::load::{LoadOptions, DEFAULT_MAX_TEXELS};
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Sanitized};
 
+use crate::cmd::UsageError;
 use crate::progress::Progress;
 
 /// The prefix that names a procedural map instead of a file.
@@ -35,17 +37,32 @@ pub struct LightArgs {
     #[arg(long, value_enum, default_value_t = LookupArg::Bilinear)]
     pub lookup: LookupArg,
 
-    /// How directions are drawn from the density.
+    /// How directions are drawn from the density (all give the same density).
     #[arg(long, value_name = "NAME", value_enum, default_value_t = SamplerArg::Inversion)]
     pub sampler: SamplerArg,
 
-    /// The shape of the sampling density over the map.
+    /// The shape of the sampling density over the map (piecewise-bilinear needs
+    /// --sampler inversion).
     #[arg(long, value_name = "NAME", value_enum, default_value_t = DensityArg::PiecewiseConstant)]
     pub density: DensityArg,
 
-    /// How image points map to directions.
+    /// The parameterization the light samples and looks up in [default: the same as
+    /// --input-mapping]. A lat-long map lit with equal-area is resampled to an
+    /// equal-area square (--equal-area-size); an equal-area map can only be lit
+    /// with equal-area.
+    #[arg(long, value_name = "NAME", value_enum)]
+    pub mapping: Option<MappingArg>,
+
+    /// What MAP is: a lat-long panorama, or an equal-area octahedral square (as
+    /// PBRT-v4 writes them; must be square).
     #[arg(long, value_name = "NAME", value_enum, default_value_t = MappingArg::Equirectangular)]
-    pub mapping: MappingArg,
+    pub input_mapping: MappingArg,
+
+    /// Side N of the N×N equal-area square a lat-long map is resampled to for
+    /// --mapping equal-area [default: about the map's texel count, √(w h) rounded
+    /// to even].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub equal_area_size: Option<u64>,
 
     /// Refuse maps with more texels than N (guards against absurd headers).
     #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_TEXELS)]
@@ -62,30 +79,76 @@ pub struct LightArgs {
 pub enum LookupArg {
     /// The texel containing the direction.
     Nearest,
-    /// Bilinear interpolation (u wraps, v clamps); the importance is blurred by
-    /// [1 6 1]/8 so every lit direction can be sampled.
+    /// Bilinear interpolation (lat-long: u wraps, v clamps; equal-area: both
+    /// clamp); the importance is blurred by [1 6 1]/8 so every lit direction can be
+    /// sampled.
     Bilinear,
 }
 
 /// `--sampler`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum SamplerArg {
-    /// CDF inversion: a row from the marginal, then a column from that row.
+    /// CDF inversion: a row from the marginal, then a column from that row. Keeps
+    /// stratification; invertible.
     Inversion,
+    /// Vose's alias table: O(1) per sample, but breaks stratification and has no
+    /// inverse.
+    Alias,
+    /// Hierarchical warping down a pyramid of sums: keeps stratification;
+    /// invertible.
+    Hierarchical,
+}
+
+impl SamplerArg {
+    /// The library's sampler.
+    pub fn to_library(self) -> Sampler {
+        match self {
+            Self::Inversion => Sampler::Inversion,
+            Self::Alias => Sampler::Alias,
+            Self::Hierarchical => Sampler::Hierarchical,
+        }
+    }
 }
 
 /// `--density`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DensityArg {
-    /// Constant over each texel (in image space), ∝ luminance · sin θ.
+    /// Constant over each texel (in image space), ∝ filtered luminance × the
+    /// mapping's area factor.
     PiecewiseConstant,
+    /// Bilinear between texel centres, ∝ the bilinear radiance reconstruction's
+    /// luminance × the area factor (sampled by inversion only).
+    PiecewiseBilinear,
 }
 
-/// `--mapping`.
+impl DensityArg {
+    /// The library's density.
+    pub fn to_library(self) -> Density {
+        match self {
+            Self::PiecewiseConstant => Density::PiecewiseConstant,
+            Self::PiecewiseBilinear => Density::PiecewiseBilinear,
+        }
+    }
+}
+
+/// `--mapping` and `--input-mapping`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MappingArg {
     /// Latitude-longitude: θ = π v, φ = 2π u.
     Equirectangular,
+    /// The equal-area octahedral square (PBRT-v4's): constant Jacobian 4π, no pole
+    /// singularity.
+    EqualArea,
+}
+
+impl MappingArg {
+    /// The library's mapping.
+    pub fn to_library(self) -> Mapping {
+        match self {
+            Self::Equirectangular => Mapping::Equirectangular,
+            Self::EqualArea => Mapping::EqualArea,
+        }
+    }
 }
 
 /// The name clap shows for a value-enum choice (also what reports print).
@@ -113,6 +176,20 @@ fn parse_scale(s: &str) -> Result<f32, String> {
     }
 }
 
+/// A decoded map, before the light is built from it.
+pub struct Input {
+    /// The map's texels, in the input mapping.
+    pub image: EnvImage,
+    /// The map as the user named it (a path or `builtin:NAME`), for messages.
+    pub name: String,
+    /// `builtin`, or the decoded file format (`hdr`, `exr`, `pfm`, `png`, `jpeg`).
+    pub format: String,
+    /// Wall time to read and decode the map, in milliseconds.
+    pub load_ms: f64,
+    /// Negative and non-finite texels that were replaced.
+    pub sanitized: Sanitized,
+}
+
 /// A built light and what was learnt while building it.
 pub struct Loaded {
     /// The light.
@@ -121,6 +198,10 @@ pub struct Loaded {
     pub name: String,
     /// `builtin`, or the decoded file format (`hdr`, `exr`, `pfm`, `png`, `jpeg`).
     pub format: String,
+    /// Size of the map as read (the light's own image differs for an equal-area
+    /// light built from a lat-long map).
+    pub input_width: usize,
+    pub input_height: usize,
     /// Wall time to read and decode the map, in milliseconds.
     pub load_ms: f64,
     /// Wall time to build the light (sampling distribution, integrals), in ms.
@@ -132,7 +213,13 @@ pub struct Loaded {
 }
 
 impl LightArgs {
-    /// The library's light options for these arguments.
+    /// The mapping the light uses: `--mapping`, or by default the input's.
+    pub fn mapping(&self) -> MappingArg {
+        self.mapping.unwrap_or(self.input_mapping)
+    }
+
+    /// The library's light options for these arguments (MIS compensation off: it
+    /// is a rendering strategy, not a light option of the CLI).
     pub fn light_options(&self) -> LightOptions {
         LightOptions {
             scale: self.scale,
@@ -145,7 +232,63 @@ impl LightArgs {
                 LookupArg::Nearest => Lookup::Nearest,
                 LookupArg::Bilinear => Lookup::Bilinear,
             },
+            sampler: self.sampler.to_library(),
+            density: self.density.to_library(),
+            mapping: self.mapping().to_library(),
+            input_mapping: self.input_mapping.to_library(),
+            equal_area_size: self
+                .equal_area_size
+                .map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
+            ..Default::default()
         }
+    }
+
+    /// Refuses option combinations the library does not support, before any work,
+    /// as a usage error (exit status 2) naming the options; warns about options
+    /// that have no effect.
+    ///
+    /// # Errors
+    /// [`UsageError`] for the piecewise-bilinear density with a sampler other than
+    /// inversion, an equal-area input lit with the equirectangular mapping, and an
+    /// `--equal-area-size` whose square exceeds `--max-texels`.
+    pub fn check(&self) -> Result<(), UsageError> {
+        if self.density == DensityArg::PiecewiseBilinear && self.sampler != SamplerArg::Inversion {
+            return Err(UsageError(format!(
+                "--density {} with --sampler {} is not supported: the piecewise-bilinear \
+                 density is sampled by inversion only (use --sampler {})",
+                choice_name(&self.density),
+                choice_name(&self.sampler),
+                choice_name(&SamplerArg::Inversion),
+            )));
+        }
+        let mapping = self.mapping();
+        if self.input_mapping == MappingArg::EqualArea && mapping == MappingArg::Equirectangular {
+            return Err(UsageError(format!(
+                "--input-mapping {} with --mapping {} is not supported: an equal-area map \
+                 can only be lit with --mapping {}",
+                choice_name(&self.input_mapping),
+                choice_name(&mapping),
+                choice_name(&MappingArg::EqualArea),
+            )));
+        }
+        if let Some(n) = self.equal_area_size {
+            let resampled = self.input_mapping == MappingArg::Equirectangular
+                && mapping == MappingArg::EqualArea;
+            if !resampled {
+                warn(&format!(
+                    "--equal-area-size {n} has no effect: only a lat-long map lit with \
+                     --mapping equal-area is resampled (here --input-mapping {}, --mapping {})",
+                    choice_name(&self.input_mapping),
+                    choice_name(&mapping)
+                ));
+            } else if n.checked_mul(n).is_none_or(|t| t > self.max_texels as u64) {
+                return Err(UsageError(format!(
+                    "--equal-area-size {n} gives more than --max-texels {} texels",
+                    self.max_texels
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// The builtin map's name when `MAP` is `builtin:NAME`.
@@ -153,13 +296,24 @@ impl LightArgs {
         self.map.to_str()?.strip_prefix(BUILTIN_PREFIX)
     }
 
-    /// Loads the map, builds the light and prints warnings (negative texels clamped,
-    /// non-finite texels replaced, loader notes, an all-black map) to stderr.
+    /// [`Self::read`] then [`Self::build`].
     ///
     /// # Errors
-    /// An unknown builtin name, or the loader's error (which names the file and,
-    /// where it applies, the texel).
+    /// As [`Self::read`] and [`Self::build`].
     pub fn load(&self) -> anyhow::Result<Loaded> {
+        let input = self.read()?;
+        self.build(input)
+    }
+
+    /// Checks the options ([`Self::check`]), then loads the map and prints
+    /// warnings about it (negative texels clamped, non-finite texels replaced,
+    /// loader notes, an odd shape) to stderr.
+    ///
+    /// # Errors
+    /// A usage error from [`Self::check`], an unknown builtin name, or the loader's
+    /// error (which names the file and, where it applies, the texel).
+    pub fn read(&self) -> anyhow::Result<Input> {
+        self.check()?;
         let name = self.map.display().to_string();
         let spinner = Progress::spinner(&format!("loading {name}"));
         let started = Instant::now();
@@ -189,11 +343,13 @@ impl LightArgs {
             warn(&format!("{name}: {note}"));
         }
         let (w, h) = (image.width(), image.height());
-        if w != 2 * h {
-            warn(&format!(
+        match self.input_mapping {
+            MappingArg::Equirectangular if w != 2 * h => warn(&format!(
                 "{name}: the map is {w}x{h}, not 2:1; it is read as equirectangular all the \
                  same (φ across the width, θ down the height)"
-            ));
+            )),
+            // A non-square equal-area map is refused by the light (below).
+            _ => {}
         }
         if sanitized.negative_texels > 0 {
             warn(&format!(
@@ -207,7 +363,30 @@ impl LightArgs {
                 sanitized.non_finite_texels
             ));
         }
+        Ok(Input {
+            image,
+            name,
+            format,
+            load_ms,
+            sanitized,
+        })
+    }
 
+    /// Builds the light from a map read by [`Self::read`]; warns when it is all
+    /// black.
+    ///
+    /// # Errors
+    /// The library's refusal of the options for this map (an equal-area map that
+    /// is not square), naming the map: exit status 1 (bad input).
+    pub fn build(&self, input: Input) -> anyhow::Result<Loaded> {
+        let Input {
+            image,
+            name,
+            format,
+            load_ms,
+            sanitized,
+        } = input;
+        let (input_width, input_height) = (image.width(), image.height());
         let spinner = Progress::spinner(&format!("building light from {name}"));
         let started = Instant::now();
         let light = EnvironmentLight::new(image, self.light_options())
@@ -215,8 +394,7 @@ impl LightArgs {
         let build_ms = started.elapsed().as_secs_f64() * 1e3;
         spinner.finish();
 
-        let integral = light.distribution().integral();
-        let black = integral.is_nan() || integral <= 0.0;
+        let black = light.is_black();
         if black {
             warn(&format!(
                 "{name}: the map is all black: it emits no light, so every pdf is 0 and \
@@ -227,6 +405,8 @@ impl LightArgs {
             light,
             name,
             format,
+            input_width,
+            input_height,
             load_ms,
             build_ms,
             sanitized,
@@ -259,4 +439,39 @@ pub fn warn(message: &str) {
     use std::io::Write;
     let message = message.replace(['\n', '\r'], " ");
     let _ = writeln!(std::io::stderr().lock(), "warning: {message}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The command-line choices are exactly the library's variants, under the
+    /// library's names (which reports print).
+    #[test]
+    fn choices_are_the_library_variants_and_names() {
+        let samplers: Vec<Sampler> = SamplerArg::value_variants()
+            .iter()
+            .map(|v| {
+                assert_eq!(choice_name(v), v.to_library().name());
+                v.to_library()
+            })
+            .collect();
+        assert_eq!(samplers, Sampler::ALL);
+        let densities: Vec<Density> = DensityArg::value_variants()
+            .iter()
+            .map(|v| {
+                assert_eq!(choice_name(v), v.to_library().name());
+                v.to_library()
+            })
+            .collect();
+        assert_eq!(densities, Density::ALL);
+        let mappings: Vec<Mapping> = MappingArg::value_variants()
+            .iter()
+            .map(|v| {
+                assert_eq!(choice_name(v), v.to_library().name());
+                v.to_library()
+            })
+            .collect();
+        assert_eq!(mappings, Mapping::ALL);
+    }
 }

@@ -21,7 +21,10 @@ macro_rules! conventions {
 right and v top to bottom in [0, 1], looks along the direction with polar angle \
 θ = π v from +z and azimuth φ = 2π u from +x towards +y: \
 ω = (sin θ cos φ, sin θ sin φ, cos θ). So the top row looks up (+z), u = 0 looks \
-along +x and u = 0.25 along +y. --rotate DEG turns the map about +z (+x towards +y). \
+along +x and u = 0.25 along +y. An equal-area map (--input-mapping equal-area, or what \
+--mapping equal-area resamples a lat-long map to) is PBRT-v4's octahedral square: its \
+centre looks up (+z), its corners down, the midpoints of its right and bottom edges \
+along +x and +y. --rotate DEG turns the map about +z (+x towards +y). \
 Pdfs are solid-angle densities (per steradian); radiance is linear RGB as stored in \
 the file, times --scale.
 

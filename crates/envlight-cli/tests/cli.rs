@@ -303,15 +303,32 @@ fn sample_follows_the_hot_spot() {
 
 #[test]
 fn sample_sampler_names_are_checked() {
+    for sampler in ["inversion", "alias", "hierarchical"] {
+        envlight()
+            .args(["sample", "-n", "3", "--sampler", sampler])
+            .assert()
+            .success();
+    }
     envlight()
-        .args(["sample", "-n", "3", "--sampler", "inversion"])
-        .assert()
-        .success();
-    envlight()
-        .args(["sample", "-n", "3", "--sampler", "alias"])
+        .args(["sample", "-n", "3", "--sampler", "rejection"])
         .assert()
         .code(2)
-        .stderr(predicate::str::contains("inversion"));
+        .stderr(
+            predicate::str::contains("inversion")
+                .and(predicate::str::contains("alias"))
+                .and(predicate::str::contains("hierarchical")),
+        );
+    for (option, value) in [
+        ("--density", "piecewise-cubic"),
+        ("--mapping", "cube"),
+        ("--input-mapping", "cube"),
+        ("--equal-area-size", "0"),
+    ] {
+        envlight()
+            .args(["sample", "-n", "3", option, value])
+            .assert()
+            .code(2);
+    }
 }
 
 #[test]
@@ -574,6 +591,396 @@ fn verify_passes_on_a_real_map() {
     assert_eq!(code, 0, "{table}");
 }
 
+// ---------------------------------------------------------------- combinations
+
+const SAMPLERS: [&str; 3] = ["inversion", "alias", "hierarchical"];
+const DENSITIES: [&str; 2] = ["piecewise-constant", "piecewise-bilinear"];
+const MAPPINGS: [&str; 2] = ["equirectangular", "equal-area"];
+
+/// Whether the library supports the sampler with the density.
+fn supported(sampler: &str, density: &str) -> bool {
+    density != "piecewise-bilinear" || sampler == "inversion"
+}
+
+/// Every option combination on `map`: `info --json` reports it, `sample` is
+/// deterministic across thread counts and round-trips through `eval`
+/// bit-identically, and `verify` passes (the invert check skipped for alias only).
+/// Unsupported combinations are usage errors naming both options.
+fn every_combination(map: &str, input: &[&str], width: u64, height: u64, dir: &Path) {
+    for mapping in MAPPINGS {
+        if input.contains(&"equal-area") && mapping == "equirectangular" {
+            continue;
+        }
+        for sampler in SAMPLERS {
+            for density in DENSITIES {
+                let mut options: Vec<&str> = vec![
+                    "--sampler",
+                    sampler,
+                    "--density",
+                    density,
+                    "--mapping",
+                    mapping,
+                ];
+                options.extend_from_slice(input);
+                let what = format!("{map} {options:?}");
+                if !supported(sampler, density) {
+                    for cmd in ["info", "sample", "verify"] {
+                        let count: &[&str] = if cmd == "sample" { &["-n", "10"] } else { &[] };
+                        let out = envlight()
+                            .args([cmd, map])
+                            .args(count)
+                            .args(&options)
+                            .output()
+                            .unwrap();
+                        let stderr = String::from_utf8_lossy(&out.stderr);
+                        assert_eq!(out.status.code(), Some(2), "{cmd} {what}: {stderr}");
+                        assert!(out.stdout.is_empty(), "{cmd} {what}");
+                        assert!(
+                            stderr.starts_with("error: ")
+                                && stderr.contains(&format!("--density {density}"))
+                                && stderr.contains(&format!("--sampler {sampler}"))
+                                && stderr.contains("not supported"),
+                            "{cmd} {what}: {stderr}"
+                        );
+                    }
+                    continue;
+                }
+
+                let mut args = vec![map];
+                args.extend_from_slice(&options);
+                let v = info_json(&args);
+                assert_eq!(v["sampler"], sampler, "{what}");
+                assert_eq!(v["density"], density, "{what}");
+                assert_eq!(v["mapping"], mapping, "{what}");
+                let input_mapping = if input.contains(&"equal-area") {
+                    "equal-area"
+                } else {
+                    "equirectangular"
+                };
+                assert_eq!(v["input_mapping"], input_mapping, "{what}");
+                assert_eq!(
+                    (v["width"].as_u64(), v["height"].as_u64()),
+                    (Some(width), Some(height)),
+                    "{what}"
+                );
+                let (lw, lh) = (
+                    v["light_width"].as_u64().unwrap(),
+                    v["light_height"].as_u64().unwrap(),
+                );
+                if mapping == "equal-area" {
+                    assert_eq!(lw, lh, "{what}");
+                } else {
+                    assert_eq!((lw, lh), (width, height), "{what}");
+                }
+                let e = v["efficiency"].as_f64().unwrap();
+                assert!(e > 0.3 && e <= 1.0 + 1e-9, "{what}: efficiency {e}");
+
+                let samples = dir.join("samples.csv");
+                let run = |threads: &str| {
+                    envlight()
+                        .args(["sample", map, "-n", "3000", "--seed", "5", "-o"])
+                        .arg(&samples)
+                        .args(&options)
+                        .env("RAYON_NUM_THREADS", threads)
+                        .assert()
+                        .success();
+                    std::fs::read_to_string(&samples).unwrap()
+                };
+                let written = run("1");
+                assert_eq!(written, run("3"), "{what}: depends on the thread count");
+                let rows = parse_rows(&written);
+                assert_eq!(rows.len(), 3000);
+                assert!(rows.iter().all(|r| r[3] > 0.0), "{what}: a row with pdf 0");
+                let evaluated = stdout_of(
+                    envlight()
+                        .args(["eval", map, "--dirs"])
+                        .arg(&samples)
+                        .args(&options),
+                );
+                assert_eq!(written, evaluated, "{what}: eval differs from sample");
+
+                let mut args = vec![map, "--samples", "20000", "--seed", "3"];
+                args.extend_from_slice(&options);
+                let (code, table) = verify(&args);
+                assert_eq!(code, 0, "{what}\n{table}");
+                let invert = table.lines().find(|l| l.starts_with("invert")).unwrap();
+                let result = invert.rsplit('|').next().unwrap().trim();
+                if sampler == "alias" {
+                    assert_eq!(result, "skip", "{what}: {invert}");
+                    assert!(invert.contains("n/a"), "{what}: {invert}");
+                } else {
+                    assert_eq!(result, "pass", "{what}: {invert}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn every_combination_works_on_a_lat_long_map() {
+    let dir = TempDir::new().unwrap();
+    let map = dir.path().join("map.pfm");
+    write_pfm(&map, 32, 16, |x, y| test_map(x / 2, y / 2));
+    every_combination(map.to_str().unwrap(), &[], 32, 16, dir.path());
+}
+
+/// A small equal-area square: a bright patch in the upper hemisphere (the
+/// square's centre is +z), a dimmer ring, dark corners (the lower hemisphere).
+fn equal_area_map(x: usize, y: usize) -> [f32; 3] {
+    let (a, b) = ((x as f32 + 0.5) / 8.0 - 1.0, (y as f32 + 0.5) / 8.0 - 1.0);
+    if (x, y) == (10, 5) {
+        [50.0, 40.0, 30.0]
+    } else if a.abs() + b.abs() < 1.0 {
+        [0.3 + 0.1 * a, 0.4, 0.8 + 0.2 * b]
+    } else {
+        [0.02, 0.03 + 0.01 * (x % 2) as f32, 0.02]
+    }
+}
+
+#[test]
+fn every_combination_works_on_an_equal_area_map() {
+    let dir = TempDir::new().unwrap();
+    let map = dir.path().join("square.pfm");
+    write_pfm(&map, 16, 16, equal_area_map);
+    every_combination(
+        map.to_str().unwrap(),
+        &["--input-mapping", "equal-area"],
+        16,
+        16,
+        dir.path(),
+    );
+}
+
+#[test]
+fn an_equal_area_input_is_read_as_one() {
+    let dir = TempDir::new().unwrap();
+    let map = dir.path().join("square.pfm");
+    write_pfm(&map, 16, 16, equal_area_map);
+    let m = map.to_str().unwrap();
+    // --mapping follows --input-mapping by default.
+    let v = info_json(&[m, "--input-mapping", "equal-area"]);
+    assert_eq!(v["mapping"], "equal-area");
+    assert_eq!(v["input_mapping"], "equal-area");
+    assert_eq!(
+        (v["light_width"].as_u64(), v["light_height"].as_u64()),
+        (Some(16), Some(16))
+    );
+    // The brightest texel's centre, through the equal-area mapping (PBRT-v4's).
+    let d: Vec<f32> = v["brightest_direction"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_f64().unwrap() as f32)
+        .collect();
+    let want = envlight::equal_area::square_to_sphere(10.5 / 16.0, 5.5 / 16.0);
+    assert!(
+        (d[0] - want.x).abs() < 1e-6
+            && (d[1] - want.y).abs() < 1e-6
+            && (d[2] - want.z).abs() < 1e-6,
+        "{d:?} vs {want:?}"
+    );
+    // The samples crowd around that direction.
+    let rows = parse_rows(&stdout_of(envlight().args([
+        "sample",
+        m,
+        "--input-mapping",
+        "equal-area",
+        "-n",
+        "4000",
+    ])));
+    let near = rows
+        .iter()
+        .filter(|r| (r[0] * want.x as f64 + r[1] * want.y as f64 + r[2] * want.z as f64) > 0.95)
+        .count();
+    // The hot texel holds about 40% of the power; the 18° cone 2.5% of the sphere.
+    assert!(near > 1400, "{near} of 4000 samples near the hot texel");
+    // Read as a lat-long map instead (the default), the same file is another light.
+    let latlong = info_json(&[m]);
+    assert_eq!(latlong["input_mapping"], "equirectangular");
+    assert_ne!(latlong["brightest_direction"], v["brightest_direction"]);
+}
+
+#[test]
+fn unsupported_combinations_are_usage_errors() {
+    let dir = TempDir::new().unwrap();
+    let square = dir.path().join("square.pfm");
+    write_pfm(&square, 8, 8, |_, _| [1.0; 3]);
+    let s = square.to_str().unwrap();
+    let cases: [(&[&str], &[&str]); 3] = [
+        (
+            &["--sampler", "alias", "--density", "piecewise-bilinear"],
+            &[
+                "--density piecewise-bilinear",
+                "--sampler alias",
+                "inversion only",
+            ],
+        ),
+        (
+            &[
+                "--sampler",
+                "hierarchical",
+                "--density",
+                "piecewise-bilinear",
+                "--mapping",
+                "equal-area",
+            ],
+            &["--density piecewise-bilinear", "--sampler hierarchical"],
+        ),
+        (
+            &[
+                s,
+                "--input-mapping",
+                "equal-area",
+                "--mapping",
+                "equirectangular",
+            ],
+            &["--input-mapping equal-area", "--mapping equirectangular"],
+        ),
+    ];
+    for (args, needles) in cases {
+        let never = dir.path().join("never.png");
+        for cmd in ["info", "verify", "importance", "bench", "render"] {
+            let mut run = envlight();
+            run.arg(cmd).args(args);
+            if matches!(cmd, "importance" | "render") {
+                run.arg("-o").arg(&never);
+            }
+            let out = run.output().unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{cmd} {args:?}: {stderr}");
+            assert!(out.stdout.is_empty(), "{cmd} {args:?}");
+            let lines: Vec<&str> = stderr.lines().collect();
+            assert_eq!(lines.len(), 1, "{cmd} {args:?}: {stderr}");
+            assert!(lines[0].starts_with("error: "), "{stderr}");
+            for needle in needles {
+                assert!(
+                    lines[0].contains(needle),
+                    "{cmd} {args:?}: {needle:?} not in {stderr}"
+                );
+            }
+        }
+    }
+    assert!(!dir.path().join("never.png").exists());
+    // A lat-long file read as an equal-area square is bad input (exit 1), naming
+    // the file and its size.
+    let (_d, map) = pfm_dir();
+    let stderr = assert_error(
+        envlight().args([
+            "info",
+            map.to_str().unwrap(),
+            "--input-mapping",
+            "equal-area",
+        ]),
+        map.to_str().unwrap(),
+    );
+    assert!(
+        stderr.contains("square") && stderr.contains("16x8"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn equal_area_size_sets_the_resampled_square() {
+    let v = info_json(&["--mapping", "equal-area", "--equal-area-size", "64"]);
+    assert_eq!(
+        (v["light_width"].as_u64(), v["light_height"].as_u64()),
+        (Some(64), Some(64))
+    );
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(1024), Some(512))
+    );
+    // Without it, about the map's texel count.
+    let v = info_json(&["--mapping", "equal-area"]);
+    let side = v["light_width"].as_u64().unwrap();
+    assert!(
+        (side as f64 / (1024.0f64 * 512.0).sqrt() - 1.0).abs() < 0.01,
+        "{side}"
+    );
+    // Squares beyond --max-texels are refused before any work.
+    envlight()
+        .args([
+            "info",
+            "--mapping",
+            "equal-area",
+            "--equal-area-size",
+            "5000",
+        ])
+        .args(["--max-texels", "1000000"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("--equal-area-size 5000"));
+    // Where nothing is resampled it has no effect, and says so.
+    envlight()
+        .args(["info", "--equal-area-size", "64"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "warning: --equal-area-size 64 has no effect",
+        ));
+    let text =
+        stdout_of(envlight().args(["info", "--mapping", "equal-area", "--equal-area-size", "64"]));
+    assert!(
+        text.contains("1024 x 512") && text.contains("64 x 64"),
+        "{text}"
+    );
+}
+
+#[test]
+fn importance_and_bench_work_with_every_sampler_and_mapping() {
+    let (dir, map) = pfm_dir();
+    let m = map.to_str().unwrap();
+    for mapping in MAPPINGS {
+        let png = dir.path().join("imp.png");
+        envlight()
+            .args([
+                "importance",
+                m,
+                "--width",
+                "128",
+                "--samples",
+                "30",
+                "--mapping",
+                mapping,
+                "-o",
+            ])
+            .arg(&png)
+            .assert()
+            .success();
+        check_png(&png, 128);
+        for sampler in SAMPLERS {
+            for density in DENSITIES {
+                if !supported(sampler, density) {
+                    continue;
+                }
+                let out = stdout_of(envlight().args([
+                    "bench",
+                    m,
+                    "--json",
+                    "--queries",
+                    "1024",
+                    "--repeat",
+                    "1",
+                    "--sampler",
+                    sampler,
+                    "--density",
+                    density,
+                    "--mapping",
+                    mapping,
+                ]));
+                let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+                for key in ["sample_ns", "pdf_ns", "build_ms", "bytes_per_texel"] {
+                    let x = v[key].as_f64().unwrap_or(f64::NAN);
+                    assert!(
+                        x.is_finite() && x >= 0.0,
+                        "{sampler} {density} {mapping}: {key} = {x}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------- bad input
 
 #[test]
@@ -787,6 +1194,22 @@ fn all_black_map_gives_pdf_zero_rows_and_a_warning() {
     let (code, table) = verify(&[path.to_str().unwrap()]);
     assert_eq!(code, 0, "{table}");
     assert!(table.contains("skip"));
+    // Whatever the sampler, density and mapping.
+    for options in [
+        &["--sampler", "alias"][..],
+        &["--sampler", "hierarchical", "--mapping", "equal-area"][..],
+        &["--density", "piecewise-bilinear", "--mapping", "equal-area"][..],
+    ] {
+        let p = path.to_str().unwrap();
+        let rows = parse_rows(&stdout_of(
+            envlight().args(["sample", p, "-n", "50"]).args(options),
+        ));
+        assert!(rows.iter().all(|r| r[3..] == [0.0; 4]), "{options:?}");
+        let v = info_json(&[&[p][..], options].concat());
+        assert_eq!(v["black"], true, "{options:?}");
+        let (code, table) = verify(&[&[p][..], options].concat());
+        assert_eq!(code, 0, "{options:?}\n{table}");
+    }
     let png = dir.path().join("black.png");
     envlight()
         .arg("importance")
@@ -813,17 +1236,30 @@ fn one_texel_and_one_hot_texel_maps_work() {
     });
     for map in [&one, &hot] {
         let m = map.to_str().unwrap();
-        info_json(&[m]);
-        let rows = parse_rows(&stdout_of(envlight().args(["sample", m, "-n", "2000"])));
-        assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())));
-        let (code, table) = verify(&[m, "--samples", "5000"]);
-        assert_eq!(code, 0, "{m}\n{table}");
-        let png = dir.path().join("x.png");
-        envlight()
-            .args(["importance", m, "--width", "64", "--samples", "20", "-o"])
-            .arg(&png)
-            .assert()
-            .success();
+        for options in [
+            &[][..],
+            &["--mapping", "equal-area"][..],
+            &["--density", "piecewise-bilinear"][..],
+            &["--sampler", "hierarchical", "--mapping", "equal-area"][..],
+            &["--sampler", "alias"][..],
+        ] {
+            let mut args = vec![m];
+            args.extend_from_slice(options);
+            info_json(&args);
+            let rows = parse_rows(&stdout_of(
+                envlight().args(["sample", "-n", "2000"]).args(&args),
+            ));
+            assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())));
+            let (code, table) = verify(&[&args[..], &["--samples", "5000"]].concat());
+            assert_eq!(code, 0, "{args:?}\n{table}");
+            let png = dir.path().join("x.png");
+            envlight()
+                .args(["importance", "--width", "64", "--samples", "20", "-o"])
+                .arg(&png)
+                .args(&args)
+                .assert()
+                .success();
+        }
     }
 }
 

@@ -22,7 +22,7 @@ pub struct Integrator<'a> {
     light: &'a EnvironmentLight,
     strategy: Strategy,
     max_depth: u32,
-    compensated: Option<CompensatedLight<'a>>,
+    compensated: Option<CompensatedLight>,
 }
 
 /// The power heuristic (β = 2) weight of a technique with density `a` against one

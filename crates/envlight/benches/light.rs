@@ -36,7 +36,9 @@ fn light(width: usize, lookup: Lookup) -> EnvironmentLight {
 const QUERIES: usize = 4096;
 
 fn random_xi() -> Vec<[f32; 2]> {
-    (0..QUERIES as u64).map(|k| envlight::rng::xi_2d(99, k)).collect()
+    (0..QUERIES as u64)
+        .map(|k| envlight::rng::xi_2d(99, k))
+        .collect()
 }
 
 fn random_directions() -> Vec<Vec3> {
@@ -54,7 +56,10 @@ fn random_directions() -> Vec<Vec3> {
 fn bench_build(c: &mut Criterion) {
     let mut group = c.benchmark_group("build");
     group.sample_size(10);
-    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
     for width in [1024usize, 4096, 8192] {
         let image = sky(width);
         group.throughput(Throughput::Elements((width * width / 2) as u64));
@@ -68,15 +73,21 @@ fn bench_build(c: &mut Criterion) {
                 BatchSize::PerIteration,
             )
         });
-        group.bench_with_input(BenchmarkId::new("envlight-1thread", width), image, |b, img| {
-            b.iter_batched(
-                || img.clone(),
-                |img| {
-                    one_thread.install(|| EnvironmentLight::new(img, LightOptions::default()).unwrap())
-                },
-                BatchSize::PerIteration,
-            )
-        });
+        group.bench_with_input(
+            BenchmarkId::new("envlight-1thread", width),
+            image,
+            |b, img| {
+                b.iter_batched(
+                    || img.clone(),
+                    |img| {
+                        one_thread.install(|| {
+                            EnvironmentLight::new(img, LightOptions::default()).unwrap()
+                        })
+                    },
+                    BatchSize::PerIteration,
+                )
+            },
+        );
     }
     group.finish();
 }
@@ -94,15 +105,25 @@ fn bench_queries(c: &mut Criterion) {
     let mut group = c.benchmark_group("sample");
     group.throughput(Throughput::Elements(QUERIES as u64));
     group.bench_function("baseline", |b| {
-        b.iter(|| xi.iter().map(|&x| base.sample(black_box(x)).map_or(0.0, |s| s.1)).sum::<f32>())
+        b.iter(|| {
+            xi.iter()
+                .map(|&x| base.sample(black_box(x)).map_or(0.0, |s| s.1))
+                .sum::<f32>()
+        })
     });
     for (name, l) in &lights {
         group.bench_function(*name, |b| {
-            b.iter(|| xi.iter().map(|&x| l.sample(black_box(x)).map_or(0.0, |s| s.pdf)).sum::<f32>())
+            b.iter(|| {
+                xi.iter()
+                    .map(|&x| l.sample(black_box(x)).map_or(0.0, |s| s.pdf))
+                    .sum::<f32>()
+            })
         });
     }
     let mut out = vec![None; QUERIES * 64];
-    let many: Vec<[f32; 2]> = (0..out.len() as u64).map(|k| envlight::rng::xi_2d(5, k)).collect();
+    let many: Vec<[f32; 2]> = (0..out.len() as u64)
+        .map(|k| envlight::rng::xi_2d(5, k))
+        .collect();
     group.throughput(Throughput::Elements(out.len() as u64));
     group.bench_function("envlight-batch-all-threads", |b| {
         b.iter(|| lights[0].1.sample_batch(black_box(&many), &mut out))
@@ -124,11 +145,19 @@ fn bench_queries(c: &mut Criterion) {
     let mut group = c.benchmark_group("radiance");
     group.throughput(Throughput::Elements(QUERIES as u64));
     group.bench_function("baseline", |b| {
-        b.iter(|| dirs.iter().map(|&d| base.radiance(black_box(d))[1]).sum::<f32>())
+        b.iter(|| {
+            dirs.iter()
+                .map(|&d| base.radiance(black_box(d))[1])
+                .sum::<f32>()
+        })
     });
     for (name, l) in &lights {
         group.bench_function(*name, |b| {
-            b.iter(|| dirs.iter().map(|&d| l.radiance(black_box(d))[1]).sum::<f32>())
+            b.iter(|| {
+                dirs.iter()
+                    .map(|&d| l.radiance(black_box(d))[1])
+                    .sum::<f32>()
+            })
         });
     }
     group.finish();

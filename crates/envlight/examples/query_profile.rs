@@ -8,7 +8,10 @@ use std::hint::black_box;
 fn main() {
     let mut args = std::env::args().skip(1);
     let what = args.next().unwrap_or_else(|| "pdf".to_string());
-    let n: u64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(1_000_000);
+    let n: u64 = args
+        .next()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1_000_000);
     let light = EnvironmentLight::new(builtin::sky(256, 128), LightOptions::default())
         .expect("the built-in sky builds");
     let mut acc = 0.0f32;
@@ -21,7 +24,11 @@ fn main() {
                 let r = (1.0 - z * z).max(0.0).sqrt();
                 let phi = 2.0 * std::f32::consts::PI * b;
                 let d = Vec3::new(r * phi.cos(), r * phi.sin(), z);
-                acc += if what == "radiance" { light.radiance(black_box(d))[1] } else { light.pdf(black_box(d)) };
+                acc += if what == "radiance" {
+                    light.radiance(black_box(d))[1]
+                } else {
+                    light.pdf(black_box(d))
+                };
             }
         }
     }

@@ -54,22 +54,25 @@ pub fn sky(width: usize, height: usize) -> EnvImage {
     const SUB: usize = 4;
     let mut texels = vec![[0.0f32; 3]; width * height];
     use rayon::prelude::*;
-    texels.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, texel) in row.iter_mut().enumerate() {
-            let mut sum = [0.0f32; 3];
-            for sy in 0..SUB {
-                for sx in 0..SUB {
-                    let u = (x as f32 + (sx as f32 + 0.5) / SUB as f32) / width as f32;
-                    let v = (y as f32 + (sy as f32 + 0.5) / SUB as f32) / height as f32;
-                    let l = sky_radiance(equirect_to_direction(u, v).0);
-                    for k in 0..3 {
-                        sum[k] += l[k];
+    texels
+        .par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, texel) in row.iter_mut().enumerate() {
+                let mut sum = [0.0f32; 3];
+                for sy in 0..SUB {
+                    for sx in 0..SUB {
+                        let u = (x as f32 + (sx as f32 + 0.5) / SUB as f32) / width as f32;
+                        let v = (y as f32 + (sy as f32 + 0.5) / SUB as f32) / height as f32;
+                        let l = sky_radiance(equirect_to_direction(u, v).0);
+                        for k in 0..3 {
+                            sum[k] += l[k];
+                        }
                     }
                 }
+                *texel = sum.map(|s| s / (SUB * SUB) as f32);
             }
-            *texel = sum.map(|s| s / (SUB * SUB) as f32);
-        }
-    });
+        });
     EnvImage::new(width, height, texels).expect("the procedural sky is finite and non-negative")
 }
 

@@ -293,7 +293,10 @@ mod tests {
         let mode = Lookup::Bilinear;
         assert_eq!(img.lookup_wrapped(0.0, 0.25, mode, WrapU::Clamp)[0], 0.0);
         assert_eq!(img.lookup_wrapped(0.999, 0.25, mode, WrapU::Clamp)[0], 3.0);
-        assert_eq!(img.lookup_wrapped(1.2, 0.25, Lookup::Nearest, WrapU::Clamp)[0], 3.0);
+        assert_eq!(
+            img.lookup_wrapped(1.2, 0.25, Lookup::Nearest, WrapU::Clamp)[0],
+            3.0
+        );
         assert!((img.lookup_wrapped(0.5, 0.25, mode, WrapU::Clamp)[0] - 1.5).abs() < 1e-6);
     }
 

@@ -1,25 +1,156 @@
-//! The environment light: an equirectangular HDR image at infinity, importance
-//! sampled in proportion to its luminance.
+//! The environment light: an HDR image at infinity, importance sampled in
+//! proportion to its luminance.
 //!
-//! Construction (DESIGN.md §4):
-//! 1. importance `f[j][i] = Y(filtered radiance of texel (i, j)) · sin θ_j`, with
-//!    `θ_j = π (j + ½) / h`. For bilinear lookups the filter is the exact texel-area
-//!    average of the bilinear reconstruction, the separable `[1 6 1]/8` blur (wrap in
-//!    u, clamp in v), so every direction where `radiance()` can be non-zero has
-//!    `pdf() > 0`. Nearest lookups need no filter.
-//! 2. a [`Distribution2D`] over `f`.
+//! Construction (DESIGN.md §4), for the default piecewise-constant density:
+//! 1. importance `f[j][i] = Y(filtered radiance of texel (i, j)) · J_j`, where `J_j`
+//!    is the mapping's area factor at the row centre (`sin θ_j` for the
+//!    equirectangular map, 1 for the equal-area square). For bilinear lookups the
+//!    filter is the exact texel-area average of the bilinear reconstruction, the
+//!    separable `[1 6 1]/8` blur (u wraps or clamps with the mapping, v clamps), so
+//!    every direction where `radiance()` can be non-zero has `pdf() > 0`. Nearest
+//!    lookups need no filter.
+//! 2. a 2D sampler over `f` ([`Sampler`]).
 //!
-//! Sampling maps `(u, v)` from the distribution to a direction and converts the
-//! density to solid angle: `p(ω) = p(u, v) / (2π² sin θ)`.
+//! The piecewise-bilinear density instead puts `Y · J` at the texel centres (the
+//! nodes of the bilinear reconstruction) and samples the bilinear interpolation of
+//! those values, so `L / p` is nearly constant.
+//!
+//! Sampling maps the image point `(u, v)` to a direction and converts the density to
+//! solid angle: `p(ω) = p(u, v) / (dω / du dv)`, with `dω / du dv = 2π² sin θ`
+//! (equirectangular) or `4π` (equal-area).
 
+use crate::alias::AliasTable2D;
+use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
-use crate::distribution::Distribution2D;
+use crate::distribution::{Distribution2D, Sample2D};
+use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::error::{Error, Result};
-use crate::image::{EnvImage, Lookup};
+use crate::hierarchical::Hierarchical2D;
+use crate::image::{EnvImage, Lookup, WrapU};
 use crate::mapping::{direction_to_equirect, equirect_to_direction, EQUIRECT_JACOBIAN};
 use crate::math::{Rotation, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
+
+/// How directions are drawn from the density. All give the same density; they
+/// differ in speed, memory and whether nearby `ξ` give nearby directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Sampler {
+    /// CDF inversion (the seed's method): a row from the marginal, then a column
+    /// from the row. Two binary searches; keeps stratification; invertible.
+    #[default]
+    Inversion,
+    /// Vose's alias table over all cells: O(1) per sample, but it breaks
+    /// stratification (nearby `ξ` land anywhere), and it has no inverse.
+    Alias,
+    /// Hierarchical warping down a pyramid of sums: keeps stratification and is
+    /// invertible; one step per pyramid level.
+    Hierarchical,
+}
+
+/// The shape of the sampling density over the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Density {
+    /// Constant over each texel (the seed's): `f[j][i]` as in the module docs.
+    #[default]
+    PiecewiseConstant,
+    /// Bilinear between texel centres, proportional to the bilinear radiance
+    /// reconstruction times the mapping's area factor at the nodes. Sampled by
+    /// inversion only.
+    PiecewiseBilinear,
+}
+
+/// How image points map to directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mapping {
+    /// Latitude-longitude: `θ = π v`, `φ = 2π u` ([`crate::mapping`]).
+    #[default]
+    Equirectangular,
+    /// The equal-area octahedral square ([`crate::equal_area`]): constant Jacobian
+    /// `4π`, no pole singularity.
+    EqualArea,
+}
+
+impl Sampler {
+    /// Every sampler, for option parsers and tests.
+    pub const ALL: [Sampler; 3] = [Sampler::Inversion, Sampler::Alias, Sampler::Hierarchical];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampler::Inversion => "inversion",
+            Sampler::Alias => "alias",
+            Sampler::Hierarchical => "hierarchical",
+        }
+    }
+}
+
+impl Density {
+    /// Every density, for option parsers and tests.
+    pub const ALL: [Density; 2] = [Density::PiecewiseConstant, Density::PiecewiseBilinear];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Density::PiecewiseConstant => "piecewise-constant",
+            Density::PiecewiseBilinear => "piecewise-bilinear",
+        }
+    }
+}
+
+impl Mapping {
+    /// Every mapping, for option parsers and tests.
+    pub const ALL: [Mapping; 2] = [Mapping::Equirectangular, Mapping::EqualArea];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mapping::Equirectangular => "equirectangular",
+            Mapping::EqualArea => "equal-area",
+        }
+    }
+
+    /// How u behaves at the image's left and right edges.
+    fn wrap(self) -> WrapU {
+        match self {
+            Mapping::Equirectangular => WrapU::Periodic,
+            Mapping::EqualArea => WrapU::Clamp,
+        }
+    }
+
+    /// The unit direction at `uv` and `dω / du dv` there.
+    #[inline]
+    fn to_direction(self, uv: [f32; 2]) -> (Vec3, f32) {
+        match self {
+            Mapping::Equirectangular => {
+                let (d, sin_theta) = equirect_to_direction(uv[0], uv[1]);
+                (d, EQUIRECT_JACOBIAN * sin_theta)
+            }
+            Mapping::EqualArea => (
+                equal_area::square_to_sphere(uv[0], uv[1]),
+                EQUAL_AREA_JACOBIAN,
+            ),
+        }
+    }
+
+    /// The image point looking along `d`, and `dω / du dv` there.
+    #[inline]
+    fn to_uv(self, d: Vec3) -> ([f32; 2], f32) {
+        match self {
+            Mapping::Equirectangular => {
+                let uv = direction_to_equirect(d);
+                (uv, EQUIRECT_JACOBIAN * (std::f32::consts::PI * uv[1]).sin())
+            }
+            Mapping::EqualArea => (equal_area::sphere_to_square(d), EQUAL_AREA_JACOBIAN),
+        }
+    }
+
+    /// The mapping's area factor `J` at image height `v`, relative to its maximum
+    /// (`sin θ` for lat-long, 1 for equal-area): what importance is multiplied by.
+    fn area_factor(self, v: f64) -> f64 {
+        match self {
+            Mapping::Equirectangular => (PI * v).sin(),
+            Mapping::EqualArea => 1.0,
+        }
+    }
+}
 
 /// How an [`EnvironmentLight`] is built and placed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +162,28 @@ pub struct LightOptions {
     /// How radiance is reconstructed between texels; the importance is filtered to
     /// cover this lookup's support.
     pub lookup: Lookup,
+    /// How directions are drawn from the density.
+    pub sampler: Sampler,
+    /// The shape of the density.
+    pub density: Density,
+    /// The parameterization the light samples and looks up in. A lat-long input
+    /// with [`Mapping::EqualArea`] is resampled to an equal-area square.
+    pub mapping: Mapping,
+    /// What the image given to [`EnvironmentLight::new`] is: a lat-long map (2:1 by
+    /// convention) or an equal-area square (as PBRT-v4 writes them).
+    pub input_mapping: Mapping,
+    /// Side of the equal-area square a lat-long input is resampled to; `None` keeps
+    /// about the input's texel count ([`equal_area::default_size`]).
+    pub equal_area_size: Option<usize>,
+    /// MIS compensation (Karlík et al. 2019, as in PBRT-v4): sample
+    /// `max(0, Y − Ȳ) · J` instead of `Y · J`, where `Ȳ` is the map's mean
+    /// luminance per unit solid angle. The light then spends no samples on the
+    /// part of the environment that BSDF sampling handles well. **The density is 0
+    /// wherever `Y ≤ Ȳ`**, so the light alone no longer covers the whole sphere; use
+    /// it only as one technique in multiple importance sampling with a strategy that
+    /// does (BSDF sampling), where the combination stays unbiased. A map with
+    /// nothing above its mean (a constant map) keeps the ordinary density.
+    pub mis_compensation: bool,
 }
 
 impl Default for LightOptions {
@@ -39,6 +192,12 @@ impl Default for LightOptions {
             scale: 1.0,
             rotation: Rotation::IDENTITY,
             lookup: Lookup::Bilinear,
+            sampler: Sampler::Inversion,
+            density: Density::PiecewiseConstant,
+            mapping: Mapping::Equirectangular,
+            input_mapping: Mapping::Equirectangular,
+            equal_area_size: None,
+            mis_compensation: false,
         }
     }
 }
@@ -52,8 +211,67 @@ pub struct LightSample {
     pub pdf: f32,
     /// Radiance arriving from `direction` (linear RGB, scale applied).
     pub radiance: [f32; 3],
-    /// The image point `[u, v]` the direction came from.
+    /// The image point `[u, v]` the direction came from (in the light's mapping).
     pub uv: [f32; 2],
+}
+
+/// The 2D sampler over `[0, 1]²` behind a light.
+#[derive(Debug, Clone)]
+enum Planar {
+    Inversion(Distribution2D),
+    Alias(AliasTable2D),
+    Hierarchical(Hierarchical2D),
+    Bilinear(BilinearDistribution2D),
+}
+
+impl Planar {
+    #[inline]
+    fn sample(&self, xi: [f32; 2]) -> Sample2D {
+        match self {
+            Planar::Inversion(d) => d.sample_continuous(xi),
+            Planar::Alias(d) => d.sample_continuous(xi),
+            Planar::Hierarchical(d) => d.sample_continuous(xi),
+            Planar::Bilinear(d) => d.sample_continuous(xi),
+        }
+    }
+
+    #[inline]
+    fn pdf(&self, uv: [f32; 2]) -> f32 {
+        match self {
+            Planar::Inversion(d) => d.pdf(uv),
+            Planar::Alias(d) => d.pdf(uv),
+            Planar::Hierarchical(d) => d.pdf(uv),
+            Planar::Bilinear(d) => d.pdf(uv),
+        }
+    }
+
+    #[inline]
+    fn invert(&self, uv: [f32; 2]) -> Option<[f32; 2]> {
+        match self {
+            Planar::Inversion(d) => Some(d.invert(uv)),
+            Planar::Alias(_) => None,
+            Planar::Hierarchical(d) => Some(d.invert(uv)),
+            Planar::Bilinear(d) => Some(d.invert(uv)),
+        }
+    }
+
+    fn integral(&self) -> f64 {
+        match self {
+            Planar::Inversion(d) => d.integral(),
+            Planar::Alias(d) => d.integral(),
+            Planar::Hierarchical(d) => d.integral(),
+            Planar::Bilinear(d) => d.integral(),
+        }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        match self {
+            Planar::Inversion(d) => d.memory_bytes(),
+            Planar::Alias(d) => d.memory_bytes(),
+            Planar::Hierarchical(d) => d.memory_bytes(),
+            Planar::Bilinear(d) => d.memory_bytes(),
+        }
+    }
 }
 
 /// An importance-sampled environment light.
@@ -62,7 +280,7 @@ pub struct LightSample {
 ///
 /// ```
 /// use envlight::{EnvImage, EnvironmentLight, LightOptions};
-/// // A 2×1 map: the upper hemisphere is bright, the lower dark.
+/// // The upper hemisphere is bright, the lower dark.
 /// let image = EnvImage::from_fn(8, 4, |_, y| if y < 2 { [1.0; 3] } else { [0.0; 3] }).unwrap();
 /// let light = EnvironmentLight::new(image, LightOptions::default()).unwrap();
 /// let s = light.sample([0.3, 0.6]).expect("a non-black map always samples");
@@ -70,23 +288,31 @@ pub struct LightSample {
 /// ```
 #[derive(Debug, Clone)]
 pub struct EnvironmentLight {
+    /// The radiance image in the light's mapping (resampled if the input differs).
     image: EnvImage,
     options: LightOptions,
     world_to_light: Rotation,
     /// False for the identity rotation, which the hot paths then skip.
     rotated: bool,
-    distribution: Distribution2D,
+    planar: Planar,
     /// `∫ L dω` of the unscaled image, per channel.
     integral_rgb: [f64; 3],
+    /// Whether MIS compensation is in effect (asked for, and something was above
+    /// the mean).
+    compensated: bool,
 }
 
 impl EnvironmentLight {
     /// Builds the light and its sampling distribution (rows in parallel).
     ///
-    /// Time `O(w h)`; memory: the image plus 8 bytes per texel of sampling data.
+    /// Time `O(w h)` (plus the resampling for an equal-area light from a lat-long
+    /// map); memory: the image plus the sampler's data, 8 bytes per texel for the
+    /// default inversion sampler.
     ///
     /// # Errors
-    /// [`Error::InvalidOption`] when `options.scale` is negative or not finite.
+    /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
+    /// bilinear density is asked of a sampler other than inversion, an equal-area
+    /// input is not square, or an equal-area input is asked for a lat-long light.
     pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
         if !(options.scale >= 0.0 && options.scale.is_finite()) {
             return Err(Error::InvalidOption(format!(
@@ -94,18 +320,55 @@ impl EnvironmentLight {
                 options.scale
             )));
         }
-        let (distribution, integral_rgb) = build_importance(&image, options.lookup);
+        if options.density == Density::PiecewiseBilinear && options.sampler != Sampler::Inversion {
+            return Err(Error::InvalidOption(format!(
+                "the piecewise-bilinear density is sampled by inversion only, not by the {} sampler",
+                options.sampler.name()
+            )));
+        }
+        let image = match (options.input_mapping, options.mapping) {
+            (Mapping::Equirectangular, Mapping::Equirectangular) => image,
+            (Mapping::Equirectangular, Mapping::EqualArea) => {
+                let size = options
+                    .equal_area_size
+                    .unwrap_or_else(|| equal_area::default_size(image.width(), image.height()));
+                if size == 0 {
+                    return Err(Error::InvalidOption(
+                        "the equal-area size must be at least 1".into(),
+                    ));
+                }
+                equal_area::resample_equirect(&image, size, options.lookup)
+            }
+            (Mapping::EqualArea, Mapping::EqualArea) => {
+                if image.width() != image.height() {
+                    return Err(Error::InvalidOption(format!(
+                        "an equal-area map must be square, this one is {}x{}",
+                        image.width(),
+                        image.height()
+                    )));
+                }
+                image
+            }
+            (Mapping::EqualArea, Mapping::Equirectangular) => {
+                return Err(Error::InvalidOption(
+                    "an equal-area input can only be lit with the equal-area mapping".into(),
+                ))
+            }
+        };
+        let (planar, integral_rgb, compensated) = build_sampler(&image, &options);
         Ok(Self {
             world_to_light: options.rotation.inverse(),
             rotated: !options.rotation.is_identity(),
             image,
             options,
-            distribution,
+            planar,
             integral_rgb,
+            compensated,
         })
     }
 
-    /// The image the light was built from.
+    /// The radiance image the light looks up, in its own mapping (for an
+    /// equal-area light built from a lat-long map, the resampled square).
     pub fn image(&self) -> &EnvImage {
         &self.image
     }
@@ -115,14 +378,26 @@ impl EnvironmentLight {
         &self.options
     }
 
-    /// The sampling distribution over `[0, 1]²` (u along the width, v down).
-    pub fn distribution(&self) -> &Distribution2D {
-        &self.distribution
+    /// The parameterization of [`Self::image`] and of the `uv` of samples.
+    pub fn mapping(&self) -> Mapping {
+        self.options.mapping
+    }
+
+    /// True when the density is MIS-compensated ([`LightOptions::mis_compensation`]
+    /// was asked for and part of the map is above its mean luminance).
+    pub fn is_compensated(&self) -> bool {
+        self.compensated
+    }
+
+    /// True when the map emits no light: every pdf is 0 and nothing can be sampled.
+    pub fn is_black(&self) -> bool {
+        let integral = self.planar.integral();
+        integral.is_nan() || integral <= 0.0
     }
 
     /// Bytes of sampling data (excluding the image).
     pub fn sampling_bytes(&self) -> usize {
-        self.distribution.memory_bytes()
+        self.planar.memory_bytes()
     }
 
     #[inline]
@@ -145,31 +420,42 @@ impl EnvironmentLight {
 
     #[inline]
     fn lookup(&self, uv: [f32; 2]) -> [f32; 3] {
-        let l = self.image.lookup(uv[0], uv[1], self.options.lookup);
+        let l = self.image.lookup_wrapped(
+            uv[0],
+            uv[1],
+            self.options.lookup,
+            self.options.mapping.wrap(),
+        );
         let s = self.options.scale;
         [l[0] * s, l[1] * s, l[2] * s]
     }
 
     /// Draws a direction for `ξ ∈ [0, 1)²` with density ∝ importance.
     ///
-    /// Returns `None` when the map is black (pdf 0) or the point falls exactly on a
-    /// pole, where the solid-angle density is unbounded (a set of measure zero).
+    /// Returns `None` when the map is black (pdf 0), or when the point falls exactly
+    /// on a pole of the lat-long map, where the solid-angle density is unbounded (a
+    /// set of measure zero: about one `ξ` in 2²⁴ when the top or bottom row is lit).
     #[inline]
     pub fn sample(&self, xi: [f32; 2]) -> Option<LightSample> {
-        let s = self.distribution.sample_continuous(xi);
+        let s = self.planar.sample(xi);
         if s.pdf == 0.0 {
             return None;
         }
-        let (local, sin_theta) = equirect_to_direction(s.uv[0], s.uv[1]);
-        if sin_theta <= 0.0 {
-            return None;
-        }
-        let pdf = s.pdf / (EQUIRECT_JACOBIAN * sin_theta);
-        if !pdf.is_finite() {
+        let (local, jacobian) = self.options.mapping.to_direction(s.uv);
+        let direction = self.to_world(local);
+        let pdf = match self.planar {
+            // A continuous density changes across the f32 rounding of the direction
+            // (by up to ~1e-3 relative next to a bright texel), so report it where
+            // the caller will evaluate it: at the returned direction, bit for bit
+            // what pdf() gives. A piecewise-constant density is exact at s.uv.
+            Planar::Bilinear(_) => self.pdf(direction),
+            _ => s.pdf / jacobian,
+        };
+        if !(jacobian > 0.0 && pdf > 0.0 && pdf.is_finite()) {
             return None;
         }
         Some(LightSample {
-            direction: self.to_world(local),
+            direction,
             pdf,
             radiance: self.lookup(s.uv),
             uv: s.uv,
@@ -178,15 +464,14 @@ impl EnvironmentLight {
 
     /// The solid-angle density (per steradian) with which [`Self::sample`] produces
     /// the world-space unit direction `direction`; 0 where the light is black, at the
-    /// poles, and for a black map.
+    /// poles of a lat-long map, and for a black map.
     #[inline]
     pub fn pdf(&self, direction: Vec3) -> f32 {
-        let uv = direction_to_equirect(self.to_light(direction));
-        let sin_theta = (std::f32::consts::PI * uv[1]).sin();
-        if sin_theta <= 0.0 {
+        let (uv, jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+        if jacobian.is_nan() || jacobian <= 0.0 {
             return 0.0;
         }
-        let pdf = self.distribution.pdf(uv) / (EQUIRECT_JACOBIAN * sin_theta);
+        let pdf = self.planar.pdf(uv) / jacobian;
         if pdf.is_finite() {
             pdf
         } else {
@@ -198,19 +483,7 @@ impl EnvironmentLight {
     /// that escape the scene): the image lookup, times the scale.
     #[inline]
     pub fn radiance(&self, direction: Vec3) -> [f32; 3] {
-        self.lookup(direction_to_equirect(self.to_light(direction)))
-    }
-
-    /// The image point `[u, v]` that looks along the world direction `direction`.
-    #[inline]
-    pub fn direction_to_uv(&self, direction: Vec3) -> [f32; 2] {
-        direction_to_equirect(self.to_light(direction))
-    }
-
-    /// The world direction at image point `[u, v]`.
-    #[inline]
-    pub fn uv_to_direction(&self, uv: [f32; 2]) -> Vec3 {
-        self.to_world(equirect_to_direction(uv[0], uv[1]).0)
+        self.lookup(self.direction_to_uv(direction))
     }
 
     /// [`Self::sample`] for every `ξ` in `xi`, written to `out` in order, in parallel.
@@ -239,11 +512,25 @@ impl EnvironmentLight {
         batch(directions, out, |&d| self.radiance(d));
     }
 
-    /// The sample-space point `ξ` that [`Self::sample`] maps to `direction`
-    /// (the exact inverse of sampling, up to float rounding).
+    /// The image point `[u, v]` (in the light's mapping) that looks along the world
+    /// direction `direction`.
     #[inline]
-    pub fn invert(&self, direction: Vec3) -> [f32; 2] {
-        self.distribution.invert(self.direction_to_uv(direction))
+    pub fn direction_to_uv(&self, direction: Vec3) -> [f32; 2] {
+        self.options.mapping.to_uv(self.to_light(direction)).0
+    }
+
+    /// The world direction at image point `[u, v]` (in the light's mapping).
+    #[inline]
+    pub fn uv_to_direction(&self, uv: [f32; 2]) -> Vec3 {
+        self.to_world(self.options.mapping.to_direction(uv).0)
+    }
+
+    /// The sample-space point `ξ` that [`Self::sample`] maps to `direction` (the
+    /// exact inverse of sampling, up to float rounding); `None` for the alias
+    /// sampler, which has no inverse.
+    #[inline]
+    pub fn invert(&self, direction: Vec3) -> Option<[f32; 2]> {
+        self.planar.invert(self.direction_to_uv(direction))
     }
 
     /// `∫ L dω` over the sphere per channel (scale applied), exact for the chosen
@@ -297,7 +584,7 @@ impl EnvironmentLight {
     /// Sampling efficiency `(∫ Y dω)² / ∫ (Y² / p) dω`: 1 when the pdf is exactly
     /// proportional to luminance; the variance of the estimator `Y/p` of `∫ Y dω`
     /// is `(1/efficiency - 1) (∫ Y dω)²` per sample. 0 for a black map or when the
-    /// pdf misses light.
+    /// pdf misses light (as MIS compensation does on purpose).
     ///
     /// Computed by quadrature (2×2 Gauss-Legendre points in each quarter of every
     /// texel, exact for bilinear radiance in u), in parallel. `O(16 w h)` lookups.
@@ -310,10 +597,12 @@ impl EnvironmentLight {
         }
     }
 
-    /// `(∫ Y dω, ∫ Y²/p dω)` by quadrature (unscaled; efficiency is scale-free).
+    /// `(∫ Y dω, ∫ Y²/p dω)` by quadrature over the image (unscaled; efficiency is
+    /// scale-free). Summed in row order, so independent of the thread count.
     fn luminance_moments(&self) -> (f64, f64) {
         let (w, h) = (self.image.width(), self.image.height());
-        // Gauss-Legendre 2-point nodes on [0, 1], inside each quarter texel.
+        // Gauss-Legendre 2-point nodes on [0, 1], inside each quarter texel (each
+        // quarter lies inside one patch of the bilinear reconstruction).
         let g = 0.5 / 3f64.sqrt();
         let nodes = [
             0.25 - 0.5 * g,
@@ -321,7 +610,15 @@ impl EnvironmentLight {
             0.75 - 0.5 * g,
             0.75 + 0.5 * g,
         ];
-        let jac = EQUIRECT_JACOBIAN as f64;
+        let (mapping, lookup, wrap) = (
+            self.options.mapping,
+            self.options.lookup,
+            self.options.mapping.wrap(),
+        );
+        let jacobian_scale = match mapping {
+            Mapping::Equirectangular => EQUIRECT_JACOBIAN as f64,
+            Mapping::EqualArea => EQUAL_AREA_JACOBIAN as f64,
+        };
         (0..h)
             .into_par_iter()
             .map(|j| {
@@ -329,19 +626,15 @@ impl EnvironmentLight {
                 let mut ey2p = 0.0f64;
                 for &tv in &nodes {
                     let v = (j as f64 + tv) / h as f64;
-                    let sin_theta = (PI * v).sin();
+                    let dw = jacobian_scale * mapping.area_factor(v);
                     for i in 0..w {
-                        let p_uv = self.distribution.cell_pdf(i, j) as f64;
                         for &tu in &nodes {
-                            let u = (i as f64 + tu) / w as f64;
-                            let y = luminance(self.image.lookup(
-                                u as f32,
-                                v as f32,
-                                self.options.lookup,
-                            )) as f64;
-                            let dw = jac * sin_theta;
+                            let uv = [((i as f64 + tu) / w as f64) as f32, v as f32];
+                            let y = luminance(self.image.lookup_wrapped(uv[0], uv[1], lookup, wrap))
+                                as f64;
                             ey += y * dw;
                             if y > 0.0 {
+                                let p_uv = self.planar.pdf(uv) as f64;
                                 ey2p += if p_uv > 0.0 {
                                     y * y * dw * dw / p_uv
                                 } else {
@@ -356,7 +649,6 @@ impl EnvironmentLight {
             })
             .collect::<Vec<_>>()
             .into_iter()
-            // Summed in row order so the result does not depend on the thread count.
             .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 }
@@ -379,33 +671,159 @@ fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Syn
         });
 }
 
-/// The importance distribution of DESIGN.md §4 step 1 and `∫ L dω`, in one
-/// row-parallel pass over the texels.
-///
-/// Importance: `f[j][i] = Y(filtered) · sin θ_j`; for bilinear lookups the filter is
-/// the `[1 6 1]/8` blur in v (clamped) then u (wrapped), whose three input rows come
-/// from a rolling cache so each row's luminance is computed once per block.
-///
-/// Integral: along u, wrapped linear interpolation between texel centres integrates
-/// to the row mean, so `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle
-/// of row j's reconstruction weight ([`row_solid_angles`]); exact for either lookup.
-fn build_importance(image: &EnvImage, lookup: Lookup) -> (Distribution2D, [f64; 3]) {
+/// The sampler for `options` over `image` (already in the light's mapping),
+/// `∫ L dω` of the unscaled image, and whether MIS compensation took effect.
+fn build_sampler(image: &EnvImage, options: &LightOptions) -> (Planar, [f64; 3], bool) {
     let (w, h) = (image.width(), image.height());
+    let mapping = options.mapping;
+    // The default path builds the inversion sampler in the same pass as the
+    // importance; every other path starts from the importance values.
+    let (importance, integral) = build_importance(image, options.lookup, mapping);
+    let mut compensated = false;
+    let planar = match options.density {
+        Density::PiecewiseConstant => {
+            let subtracted = options
+                .mis_compensation
+                .then(|| compensate(importance.func(), w, h, mapping))
+                .flatten();
+            compensated = subtracted.is_some();
+            let f = subtracted.as_deref().unwrap_or(importance.func());
+            match options.sampler {
+                Sampler::Inversion if !compensated => Planar::Inversion(importance),
+                Sampler::Inversion => Planar::Inversion(Distribution2D::new(f, w)),
+                Sampler::Alias => Planar::Alias(AliasTable2D::new(f, w)),
+                Sampler::Hierarchical => Planar::Hierarchical(Hierarchical2D::new(f, w)),
+            }
+        }
+        Density::PiecewiseBilinear => {
+            drop(importance);
+            let (mut values, u_nodes, v_nodes) = bilinear_nodes(image, mapping);
+            let (mu, mv) = (u_nodes.len(), v_nodes.len());
+            if options.mis_compensation {
+                // Nodes carry Y·J at their own v; subtract Ȳ·J node by node.
+                let factors: Vec<f64> = v_nodes.iter().map(|&v| mapping.area_factor(v)).collect();
+                if let Some(c) = compensate_rows(&values, mu, mv, &factors) {
+                    values = c;
+                    compensated = true;
+                }
+            }
+            Planar::Bilinear(BilinearDistribution2D::new(&values, &u_nodes, &v_nodes))
+        }
+    };
+    (planar, integral, compensated)
+}
+
+/// MIS compensation of a texel-grid importance `f = Y · J_j`: `max(0, f − Ȳ J_j)`
+/// with `Ȳ = Σ f / Σ J` (the solid-angle mean of the filtered luminance), or `None`
+/// when nothing is above the mean (keep `f`).
+fn compensate(f: &[f32], w: usize, h: usize, mapping: Mapping) -> Option<Vec<f32>> {
+    let factors: Vec<f64> = (0..h)
+        .map(|j| mapping.area_factor((j as f64 + 0.5) / h as f64))
+        .collect();
+    compensate_rows(f, w, h, &factors)
+}
+
+/// [`compensate`] for any grid of `rows` rows of `cols` values whose row `k` was
+/// multiplied by `factors[k]`.
+fn compensate_rows(f: &[f32], cols: usize, rows: usize, factors: &[f64]) -> Option<Vec<f32>> {
+    let total_f: f64 = f.iter().map(|&x| x as f64).sum();
+    let total_j: f64 = factors.iter().sum::<f64>() * cols as f64;
+    if !(total_f > 0.0 && total_j > 0.0) {
+        return None;
+    }
+    let mean = total_f / total_j;
+    let mut out = vec![0.0f32; f.len()];
+    let mut any = false;
+    for k in 0..rows {
+        let threshold = mean * factors[k];
+        for (o, &x) in out[k * cols..(k + 1) * cols]
+            .iter_mut()
+            .zip(&f[k * cols..(k + 1) * cols])
+        {
+            // Within rounding of the threshold counts as not above it, so a constant
+            // map (f = Ȳ J up to f32 rounding) keeps its ordinary density.
+            if x as f64 > threshold * (1.0 + 1e-5) {
+                *o = (x as f64 - threshold) as f32;
+                any = true;
+            }
+        }
+    }
+    any.then_some(out)
+}
+
+/// Node values and positions of the piecewise-bilinear density: `Y · J` at every
+/// texel centre, plus edge nodes at u = 0, 1 and v = 0, 1 that reproduce the
+/// lookup's edge behaviour (the seam average for periodic u; a copy of the edge
+/// texels for clamped u and for v). Returns `(values, u_nodes, v_nodes)`, values
+/// row-major over `(h + 2) × (w + 2)` nodes.
+fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
+    let (w, h) = (image.width(), image.height());
+    let centres = |n: usize| -> Vec<f64> {
+        let mut nodes = Vec::with_capacity(n + 2);
+        nodes.push(0.0);
+        nodes.extend((0..n).map(|i| (i as f64 + 0.5) / n as f64));
+        nodes.push(1.0);
+        nodes
+    };
+    let (u_nodes, v_nodes) = (centres(w), centres(h));
+    let mu = w + 2;
+    let mut values = vec![0.0f32; mu * (h + 2)];
+    values.par_chunks_mut(mu).enumerate().for_each(|(k, out)| {
+        // Node row k sits at v_nodes[k]; its radiance is texel row k-1, clamped.
+        let j = k.saturating_sub(1).min(h - 1);
+        let factor = mapping.area_factor(v_nodes[k]) as f32;
+        let row = image.row(j);
+        for (o, t) in out[1..=w].iter_mut().zip(row) {
+            *o = luminance(*t) * factor;
+        }
+        let (first, last) = (out[1], out[w]);
+        let (left, right) = match mapping.wrap() {
+            WrapU::Periodic => {
+                let seam = 0.5 * (first + last);
+                (seam, seam)
+            }
+            WrapU::Clamp => (first, last),
+        };
+        out[0] = left;
+        out[w + 1] = right;
+    });
+    (values, u_nodes, v_nodes)
+}
+
+/// The texel-grid importance of DESIGN.md §4 step 1 with its inversion sampler,
+/// and `∫ L dω`, in one row-parallel pass over the texels.
+///
+/// Importance: `f[j][i] = Y(filtered) · J_j`; for bilinear lookups the filter is
+/// the `[1 6 1]/8` blur in v (clamped) then u (wrapped or clamped with the
+/// mapping), whose three input rows come from a rolling cache so each row's
+/// luminance is computed once per block.
+///
+/// Integral: along u, linear interpolation between texel centres (wrapped, or
+/// clamped with constant half-texels at the ends) integrates to the row mean, so
+/// `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle of row j's
+/// reconstruction weight ([`row_solid_angles`]); exact for either lookup.
+fn build_importance(
+    image: &EnvImage,
+    lookup: Lookup,
+    mapping: Mapping,
+) -> (Distribution2D, [f64; 3]) {
+    let (w, h) = (image.width(), image.height());
+    let wrap = mapping.wrap();
     let (distribution, row_sums) = Distribution2D::from_rows_with(
         w,
         h,
         || LuminanceRows::new(w),
         |cache, j, out| {
-            let sin_theta = (PI * (j as f64 + 0.5) / h as f64).sin() as f32;
+            let factor = mapping.area_factor((j as f64 + 0.5) / h as f64) as f32;
             match lookup {
                 Lookup::Nearest => {
                     let (luma, _) = cache.row(image, j);
                     for (o, &y) in out.iter_mut().zip(luma) {
-                        *o = y * sin_theta;
+                        *o = y * factor;
                     }
                 }
                 Lookup::Bilinear => {
-                    // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal (wrapped).
+                    // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal.
                     out.copy_from_slice(cache.row(image, j.saturating_sub(1)).0);
                     for (o, &y) in out.iter_mut().zip(cache.row(image, (j + 1).min(h - 1)).0) {
                         *o += y;
@@ -414,11 +832,14 @@ fn build_importance(image: &EnvImage, lookup: Lookup) -> (Distribution2D, [f64; 
                         *o = (*o + 6.0 * y) * 0.125;
                     }
                     let (first, last) = (out[0], out[w - 1]);
-                    let mut prev = last;
+                    let (mut prev, beyond_last) = match wrap {
+                        WrapU::Periodic => (last, first),
+                        WrapU::Clamp => (first, last),
+                    };
                     for i in 0..w {
-                        let next = if i + 1 < w { out[i + 1] } else { first };
+                        let next = if i + 1 < w { out[i + 1] } else { beyond_last };
                         let centre = out[i];
-                        out[i] = (prev + 6.0 * centre + next) * 0.125 * sin_theta;
+                        out[i] = (prev + 6.0 * centre + next) * 0.125 * factor;
                         prev = centre;
                     }
                 }
@@ -426,7 +847,12 @@ fn build_importance(image: &EnvImage, lookup: Lookup) -> (Distribution2D, [f64; 
             cache.row(image, j).1
         },
     );
-    let weights = row_solid_angles(h, lookup);
+    let weights = match mapping {
+        Mapping::Equirectangular => row_solid_angles(h, lookup),
+        // Constant Jacobian: every row covers the same solid angle, 4π/h, and the
+        // clamped interpolation in v integrates to the mean like the one in u.
+        Mapping::EqualArea => vec![4.0 * PI / h as f64; h],
+    };
     let mut integral = [0.0f64; 3];
     for (sums, weight) in row_sums.iter().zip(&weights) {
         for k in 0..3 {

@@ -67,7 +67,10 @@ mod tests {
                 let (u, v) = ((i as f32 + 0.37) / 64.0, (j as f32 + 0.11) / 33.0);
                 let (d, _) = equirect_to_direction(u, v);
                 let [u2, v2] = direction_to_equirect(d);
-                assert!((u - u2).abs() < 2e-6 && (v - v2).abs() < 2e-6, "{u},{v} -> {u2},{v2}");
+                assert!(
+                    (u - u2).abs() < 2e-6 && (v - v2).abs() < 2e-6,
+                    "{u},{v} -> {u2},{v2}"
+                );
             }
         }
         // Near the poles the polar angle keeps its precision.

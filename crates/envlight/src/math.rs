@@ -35,9 +35,17 @@ pub fn atan2_fast(y: f32, x: f32) -> f32 {
         -0.060_403_409_485_716_31,
     ];
     let (ax, ay) = ((x as f64).abs(), (y as f64).abs());
-    let (num, den, swapped) = if ay > ax { (ax, ay, true) } else { (ay, ax, false) };
+    let (num, den, swapped) = if ay > ax {
+        (ax, ay, true)
+    } else {
+        (ay, ax, false)
+    };
     if den == 0.0 {
-        return if x.is_nan() || y.is_nan() { f32::NAN } else { 0.0 };
+        return if x.is_nan() || y.is_nan() {
+            f32::NAN
+        } else {
+            0.0
+        };
     }
     // atan(t) for t = num/den ∈ [0, 1]; above tan(π/8) use
     // atan(t) = π/4 + atan((t - 1)/(t + 1)).
@@ -159,7 +167,18 @@ mod tests {
 
     #[test]
     fn floor_fast_matches_floor() {
-        for x in [-2.5f32, -1.0, -0.5, -1e-9, 0.0, 1e-9, 0.5, 1.0, 2.75, 1e6 + 0.5] {
+        for x in [
+            -2.5f32,
+            -1.0,
+            -0.5,
+            -1e-9,
+            0.0,
+            1e-9,
+            0.5,
+            1.0,
+            2.75,
+            1e6 + 0.5,
+        ] {
             assert_eq!(floor_fast(x), x.floor(), "{x}");
         }
         assert_eq!(floor_fast(f32::NAN), 0.0);
@@ -181,8 +200,18 @@ mod tests {
             worst = worst.max((got - exact).abs() / ulp);
         }
         assert!(worst <= 1.0, "worst error {worst} ulp");
-        for (y, x) in [(0.0f32, 1.0f32), (1.0, 0.0), (0.0, -1.0), (-1.0, 0.0), (1.0, 1.0), (-1.0, -1.0)] {
-            assert!((atan2_fast(y, x) - y.atan2(x)).abs() <= 2.0 * f32::EPSILON, "{y},{x}");
+        for (y, x) in [
+            (0.0f32, 1.0f32),
+            (1.0, 0.0),
+            (0.0, -1.0),
+            (-1.0, 0.0),
+            (1.0, 1.0),
+            (-1.0, -1.0),
+        ] {
+            assert!(
+                (atan2_fast(y, x) - y.atan2(x)).abs() <= 2.0 * f32::EPSILON,
+                "{y},{x}"
+            );
         }
         assert_eq!(atan2_fast(0.0, 0.0), 0.0);
         assert!(atan2_fast(f32::NAN, 1.0).is_nan());

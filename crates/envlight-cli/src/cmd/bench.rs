@@ -21,8 +21,10 @@ use crate::output::Output;
 (the memory floor: one parallel pass that reads every texel and writes one f32 per \
 texel), sample_ns / pdf_ns / radiance_ns (mean per call on one thread, random ξ or \
 uniformly random directions), batch_samples_per_s (the batch API on all threads) and \
-bytes_per_texel (sampling data, the image itself aside).\n\n\
-With --json, one object with exactly the keys width, height, threads, load_ms, \
+bytes_per_texel (sampling data per texel of the light's image, the image itself aside). \
+Builds start from the map as read, with the light options given (for --mapping \
+equal-area from a lat-long map, the resampling is part of build_ms).\n\n\
+With --json, one object with exactly the keys width, height (of the map as read), threads, load_ms, \
 build_ms, build_ms_1thread, floor_ms, sample_ns, pdf_ns, radiance_ns, \
 batch_samples_per_s, bytes_per_texel (all numbers).\n\n",
     crate::conventions!()
@@ -48,11 +50,17 @@ pub struct Args {
 
 /// Runs `envlight bench`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
-    let loaded = args.light.load()?;
+    // Builds are timed from the map as read, with the options as given: for an
+    // equal-area light from a lat-long map that includes the resampling.
+    let input = args.light.read()?;
+    let input_image = input.image.clone();
+    let image = &input_image;
+    let loaded = args.light.build(input)?;
     let light = &loaded.light;
     let options = *light.options();
-    let image = light.image();
     let texels = image.width() * image.height();
+    let light_image = light.image();
+    let light_texels = light_image.width() * light_image.height();
     let threads = rayon::current_num_threads();
 
     let best_ms = |mut f: Box<dyn FnMut() + '_>| {
@@ -81,8 +89,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         .num_threads(1)
         .build()
         .context("cannot start a one-thread pool")?;
-    let build_ms_1thread =
-        (one_thread.install(|| best_ms(Box::new(build))) - clone_ms).max(0.0);
+    let build_ms_1thread = (one_thread.install(|| best_ms(Box::new(build))) - clone_ms).max(0.0);
 
     let n = args.queries;
     let xi: Vec<[f32; 2]> = (0..n).map(|k| envlight::rng::xi_2d(0xbe7c, k)).collect();
@@ -95,7 +102,11 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     };
     let (sample_ns, pdf_ns, radiance_ns) = one_thread.install(|| {
         (
-            per_call_ns(&|| xi.iter().map(|&x| light.sample(x).map_or(0.0, |s| s.pdf)).sum()),
+            per_call_ns(&|| {
+                xi.iter()
+                    .map(|&x| light.sample(x).map_or(0.0, |s| s.pdf))
+                    .sum()
+            }),
             per_call_ns(&|| dirs.iter().map(|&d| light.pdf(d)).sum()),
             per_call_ns(&|| dirs.iter().map(|&d| light.radiance(d)[1]).sum()),
         )
@@ -105,7 +116,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     light.sample_batch(&xi, &mut out_samples);
     let batch_samples_per_s = n as f64 / started.elapsed().as_secs_f64();
     black_box(&out_samples);
-    let bytes_per_texel = light.sampling_bytes() as f64 / texels as f64;
+    let bytes_per_texel = light.sampling_bytes() as f64 / light_texels as f64;
 
     let mut out = Output::create(None)?;
     let text = if args.json {
@@ -126,9 +137,22 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         format!("{value}\n")
     } else {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        let light_size = if options.mapping == options.input_mapping {
+            String::new()
+        } else {
+            format!(
+                "light size        {} x {} ({:.1} Mtexels, {})\n",
+                light_image.width(),
+                light_image.height(),
+                light_texels as f64 / 1e6,
+                options.mapping.name()
+            )
+        };
         format!(
             "map               {}\n\
              size              {} x {} ({:.1} Mtexels), {threads} threads\n\
+             {light_size}\
+             light             sampler {}, density {}, mapping {}\n\
              load              {:>10.1} ms\n\
              build             {build_ms:>10.1} ms   ({:.2}x the memory floor)\n\
              build, 1 thread   {build_ms_1thread:>10.1} ms   ({:.2}x the floor)\n\
@@ -142,6 +166,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             image.width(),
             image.height(),
             texels as f64 / 1e6,
+            options.sampler.name(),
+            options.density.name(),
+            options.mapping.name(),
             loaded.load_ms,
             ratio(build_ms, floor_ms),
             ratio(build_ms_1thread, floor_ms),

@@ -12,7 +12,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use envlight::color::{linear_to_srgb, luminance};
-use envlight::mapping::direction_to_equirect;
+use envlight::light::Mapping;
+use envlight::mapping::{direction_to_equirect, equirect_to_direction};
 use envlight::EnvironmentLight;
 use image::ImageEncoder;
 use rayon::prelude::*;
@@ -28,9 +29,10 @@ use crate::output::Output;
 filmic curve, sRGB); below it the solid-angle sampling density p(ω) in sr⁻¹ on a log \
 scale (viridis; black where p = 0) with its colour bar. Both panels are the \
 equirectangular world view: θ (0° = +z, up) runs down the side, φ (0° = +x, 90° = +y) \
-along the bottom. With --samples N the first N directions `envlight sample` would draw \
-(same --seed) are drawn as magenta dots on both panels. Maps wider than --width are \
-box-filtered down to it.\n\n",
+along the bottom, whatever --mapping the light uses. With --samples N the first N \
+directions `envlight sample` would draw (same --seed) are drawn as magenta dots on both \
+panels. Each pixel is the solid-angle weighted mean of radiance and pdf over points in \
+it, enough to see every texel of maps wider than --width.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
@@ -69,7 +71,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let pw = args.width as usize;
     let ph = (pw / 2).max(1);
 
-    let panels = Panels::new(light, pw, ph, args.light.rotate as f64);
+    let panels = Panels::new(light, pw, ph);
     let exposure = panels.exposure();
     let (lo, hi) = panels.log_pdf_range();
     let dots: Vec<(usize, usize)> = (0..args.samples)
@@ -175,91 +177,63 @@ fn short_number(x: f64) -> String {
 
 /// The map and its density resampled to the panel size, in world space.
 struct Panels {
-    /// Linear radiance per pixel (box-filtered), row-major.
+    /// Linear radiance per pixel (scale applied), row-major.
     rgb: Vec<[f32; 3]>,
     /// Solid-angle pdf per pixel: the probability in the pixel over its solid angle.
     pdf: Vec<f32>,
 }
 
 impl Panels {
-    fn new(light: &EnvironmentLight, pw: usize, ph: usize, rotate_degrees: f64) -> Self {
+    /// Each pixel of the `pw × ph` world lat-long panel is the solid-angle
+    /// weighted mean of `radiance()` and `pdf()` at `sx × sy` midpoints of its
+    /// sub-cells (each weighted by its exact solid angle `Δφ (cos θa − cos θb)`),
+    /// with enough points to see every texel of the light's image: the image's
+    /// resolution as a lat-long grid (2N × N for an N × N equal-area light) over
+    /// the panel's. Asking the light about world directions shows whatever mapping
+    /// and density it uses, and `--rotate` exactly.
+    fn new(light: &EnvironmentLight, pw: usize, ph: usize) -> Self {
         let image = light.image();
-        let (w, h) = (image.width(), image.height());
-        let scale = light.options().scale;
-        // Box filter to the panel size in image (light) space: channels R, G, B and
-        // the image-space density p(u, v) = p(ω) 2π² sin θ, both of which average
-        // over area. p(ω) comes from pdf() at each texel centre, so this shows
-        // whatever density the light samples with.
-        let columns = area_weights(w, pw);
-        let rows = area_weights(h, ph);
-        let horizontal: Vec<Vec<[f32; 4]>> = (0..h)
+        let (gw, gh) = match light.mapping() {
+            Mapping::Equirectangular => (image.width(), image.height()),
+            Mapping::EqualArea => (2 * image.width(), image.width()),
+        };
+        let (sx, sy) = (gw.div_ceil(pw).max(1), gh.div_ceil(ph).max(1));
+        let pixels: Vec<([f32; 3], f32)> = (0..ph)
             .into_par_iter()
-            .map(|j| {
-                let row = image.row(j);
-                let v = (j as f32 + 0.5) / h as f32;
-                let jacobian = (2.0 * PI * PI * (PI * v as f64).sin()) as f32;
-                let density: Vec<f32> = (0..w)
-                    .map(|i| {
-                        let u = (i as f32 + 0.5) / w as f32;
-                        light.pdf(light.uv_to_direction([u, v])) * jacobian
+            .flat_map_iter(|y| {
+                let rows: Vec<(f32, f64)> = (0..sy)
+                    .map(|t| {
+                        let va = (y * sy + t) as f64 / (sy * ph) as f64;
+                        let vb = (y * sy + t + 1) as f64 / (sy * ph) as f64;
+                        let band = (PI * va).cos() - (PI * vb).cos();
+                        (((va + vb) * 0.5) as f32, band)
                     })
                     .collect();
-                columns
-                    .iter()
-                    .map(|taps| {
-                        let mut acc = [0.0f32; 4];
-                        for &(i, wgt) in taps {
-                            let t = row[i];
-                            let p = density[i];
-                            for (a, value) in acc.iter_mut().zip([t[0], t[1], t[2], p]) {
-                                *a += wgt * value;
+                (0..pw).map(move |x| {
+                    let mut rgb = [0.0f64; 3];
+                    let mut pdf = 0.0f64;
+                    let mut total = 0.0f64;
+                    for &(v, band) in &rows {
+                        for s in 0..sx {
+                            let u = ((x * sx + s) as f32 + 0.5) / (sx * pw) as f32;
+                            let d = equirect_to_direction(u, v).0;
+                            let l = light.radiance(d);
+                            for (a, c) in rgb.iter_mut().zip(l) {
+                                *a += c as f64 * band;
                             }
-                        }
-                        acc
-                    })
-                    .collect()
-            })
-            .collect();
-        let light_space: Vec<[f32; 4]> = (0..ph)
-            .into_par_iter()
-            .flat_map_iter(|r| {
-                let mut out = vec![[0.0f32; 4]; pw];
-                for &(j, wgt) in &rows[r] {
-                    for (o, src) in out.iter_mut().zip(&horizontal[j]) {
-                        for k in 0..4 {
-                            o[k] += wgt * src[k];
+                            pdf += light.pdf(d) as f64 * band;
+                            total += band;
                         }
                     }
-                }
-                // p(ω) = p(u, v) / (2π² sin θ), with sin θ averaged over the pixel's
-                // rows (exact: the pixel's probability over its solid angle).
-                let (v0, v1) = (r as f64 / ph as f64, (r + 1) as f64 / ph as f64);
-                let mean_sin = ((PI * v0).cos() - (PI * v1).cos()) / (PI * (v1 - v0));
-                let jacobian = (2.0 * PI * PI * mean_sin) as f32;
-                for o in &mut out {
-                    o[3] = if jacobian > 0.0 { o[3] / jacobian } else { 0.0 };
-                }
-                out.into_iter()
+                    if total > 0.0 {
+                        (rgb.map(|c| (c / total) as f32), (pdf / total) as f32)
+                    } else {
+                        ([0.0; 3], 0.0)
+                    }
+                })
             })
             .collect();
-        // World space: rotating the light by α about +z moves light azimuth φ to
-        // φ + α, so world column x shows light u = u_x - α/360.
-        let shift = (rotate_degrees / 360.0).rem_euclid(1.0);
-        let source_column: Vec<usize> = (0..pw)
-            .map(|x| {
-                let u = ((x as f64 + 0.5) / pw as f64 - shift).rem_euclid(1.0);
-                ((u * pw as f64) as usize).min(pw - 1)
-            })
-            .collect();
-        let mut rgb = Vec::with_capacity(pw * ph);
-        let mut pdf = Vec::with_capacity(pw * ph);
-        for y in 0..ph {
-            for &x in &source_column {
-                let t = light_space[y * pw + x];
-                rgb.push([t[0] * scale, t[1] * scale, t[2] * scale]);
-                pdf.push(t[3]);
-            }
-        }
+        let (rgb, pdf) = pixels.into_iter().unzip();
         Self { rgb, pdf }
     }
 
@@ -298,26 +272,6 @@ impl Panels {
         let lo = min.log10().max(hi - 6.0).min(hi - 1.0);
         (lo, hi)
     }
-}
-
-/// For each of `n_dst` equal cells over `n_src` equal cells, the source cells it
-/// overlaps and their share of its length (summing to 1): a box filter that
-/// averages when shrinking and repeats when enlarging.
-fn area_weights(n_src: usize, n_dst: usize) -> Vec<Vec<(usize, f32)>> {
-    let ratio = n_src as f64 / n_dst as f64;
-    (0..n_dst)
-        .map(|k| {
-            let (a, b) = (k as f64 * ratio, (k + 1) as f64 * ratio);
-            let first = (a.floor() as usize).min(n_src - 1);
-            let last = ((b.ceil() as usize).max(first + 1)).min(n_src);
-            (first..last)
-                .filter_map(|i| {
-                    let overlap = (b.min(i as f64 + 1.0) - a.max(i as f64)).max(0.0);
-                    (overlap > 0.0).then_some((i, (overlap / (b - a)) as f32))
-                })
-                .collect()
-        })
-        .collect()
 }
 
 /// Exposure, the ACES filmic fit (Narkowicz 2015), then sRGB encoding.
@@ -584,26 +538,6 @@ fn decade_label(k: i32) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn area_weights_partition_each_cell() {
-        for (n_src, n_dst) in [(8, 4), (7, 3), (3, 7), (1, 5), (5, 1), (2048, 1024)] {
-            let weights = area_weights(n_src, n_dst);
-            assert_eq!(weights.len(), n_dst);
-            let mut per_source = vec![0.0f64; n_src];
-            for taps in &weights {
-                let sum: f32 = taps.iter().map(|t| t.1).sum();
-                assert!((sum - 1.0).abs() < 1e-5, "{n_src}->{n_dst}: {sum}");
-                for &(i, w) in taps {
-                    per_source[i] += w as f64 * n_src as f64 / n_dst as f64;
-                }
-            }
-            // Every source cell is used exactly once in total.
-            for s in per_source {
-                assert!((s - 1.0).abs() < 1e-4, "{n_src}->{n_dst}: {s}");
-            }
-        }
-    }
 
     #[test]
     fn colours_cover_the_scale() {

@@ -4,6 +4,12 @@ use std::io::Write;
 use std::time::Instant;
 
 use anyhow::Context;
+use envlight::color::luminance;
+use envlight::equal_area::square_to_sphere;
+use envlight::light::Mapping;
+use envlight::mapping::equirect_to_direction;
+use envlight::{EnvImage, LightOptions, Vec3};
+use rayon::prelude::*;
 use serde_json::json;
 
 use super::Outcome;
@@ -13,11 +19,14 @@ use crate::output::Output;
 /// Arguments of `envlight info`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = concat!(
-    "With --json, one JSON object with the keys: map, width, height, format \
-(\"builtin\", \"hdr\", \"exr\", \"pfm\", \"png\", \"jpeg\"), lookup, sampler, density, mapping, \
+    "With --json, one JSON object with the keys: map, width, height (of the map as read), \
+format (\"builtin\", \"hdr\", \"exr\", \"pfm\", \"png\", \"jpeg\"), lookup, sampler, density, mapping \
+(the light's), input_mapping (the map's), light_width, light_height (the light's own image: \
+the map's size unless a lat-long map is resampled for --mapping equal-area), \
 integral_rgb ([∫R dω, ∫G dω, ∫B dω] over the sphere), integral_luminance (∫Y dω), \
-power_unit_radius ([R,G,B] power π r² ∫L dω for r = 1), max_luminance, \
-brightest_direction ([x,y,z], the brightest texel's centre), efficiency \
+power_unit_radius ([R,G,B] power π r² ∫L dω for r = 1), max_luminance (of the map's \
+brightest texel as read, times --scale), \
+brightest_direction ([x,y,z], the centre of the map's brightest texel, as read), efficiency \
 ((∫Y dω)² / ∫(Y²/p) dω; 1 means pdf ∝ luminance), sampling_bytes, load_ms, build_ms, \
 efficiency_ms, negative_texels, most_negative, non_finite_texels, black.\n\n",
     crate::conventions!()
@@ -33,13 +42,20 @@ pub struct Args {
 
 /// Runs `envlight info`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
-    let loaded = args.light.load()?;
+    let input = args.light.read()?;
+    let options = args.light.light_options();
+    let (max_luminance, brightest) = brightest_texel(&input.image, &options);
+    let loaded = args.light.build(input)?;
     let light = &loaded.light;
+    // What the light was built with (the library's names).
+    let used = light.options();
+    let (sampler, density) = (used.sampler.name(), used.density.name());
+    let (mapping, input_mapping) = (used.mapping.name(), used.input_mapping.name());
     let image = light.image();
+    let (width, height) = (loaded.input_width, loaded.input_height);
     let integral_rgb = light.integral_rgb();
     let integral_luminance = light.integral_luminance();
     let power = light.power(1.0);
-    let (max_luminance, brightest) = light.brightest();
     let started = Instant::now();
     let efficiency = light.efficiency();
     let efficiency_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -49,13 +65,16 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let text = if args.json {
         let value = json!({
             "map": loaded.name,
-            "width": image.width(),
-            "height": image.height(),
+            "width": width,
+            "height": height,
             "format": loaded.format,
             "lookup": choice_name(&args.light.lookup),
-            "sampler": choice_name(&args.light.sampler),
-            "density": choice_name(&args.light.density),
-            "mapping": choice_name(&args.light.mapping),
+            "sampler": sampler,
+            "density": density,
+            "mapping": mapping,
+            "input_mapping": input_mapping,
+            "light_width": image.width(),
+            "light_height": image.height(),
             "rotate_degrees": args.light.rotate,
             "scale": args.light.scale,
             "integral_rgb": integral_rgb,
@@ -79,26 +98,39 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     } else {
         let (theta, phi) = angles_degrees(brightest);
         let mib = |bytes: usize| bytes as f64 / (1024.0 * 1024.0);
-        let texels = image.width() * image.height();
         let mut lines = vec![
             ("map", loaded.name.clone()),
             ("format", loaded.format.clone()),
             (
                 "size",
-                format!("{} x {} ({texels} texels)", image.width(), image.height()),
+                format!(
+                    "{width} x {height} ({} texels, {input_mapping})",
+                    width * height
+                ),
             ),
             (
                 "light",
                 format!(
-                    "lookup {}, sampler {}, density {}, mapping {}, rotate {}°, scale {}",
+                    "lookup {}, sampler {sampler}, density {density}, mapping {mapping}, \
+                     rotate {}°, scale {}",
                     choice_name(&args.light.lookup),
-                    choice_name(&args.light.sampler),
-                    choice_name(&args.light.density),
-                    choice_name(&args.light.mapping),
                     args.light.rotate,
                     args.light.scale
                 ),
             ),
+        ];
+        if used.mapping != used.input_mapping {
+            lines.push((
+                "light size",
+                format!(
+                    "{} x {} ({} texels, resampled to {mapping})",
+                    image.width(),
+                    image.height(),
+                    image.width() * image.height()
+                ),
+            ));
+        }
+        lines.extend([
             (
                 "∫ L dω",
                 format!(
@@ -141,7 +173,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
                     loaded.load_ms, loaded.build_ms
                 ),
             ),
-        ];
+        ]);
         if loaded.sanitized.negative_texels > 0 {
             lines.push((
                 "negative",
@@ -184,4 +216,40 @@ pub fn angles_degrees(d: [f32; 3]) -> (f64, f64) {
         phi += 360.0;
     }
     (theta, phi)
+}
+
+/// The brightest texel of the map as read (in its input mapping, before any
+/// resampling; the first in row order among equals): its luminance times the scale,
+/// and the world direction of its centre.
+fn brightest_texel(image: &EnvImage, options: &LightOptions) -> (f32, Vec3) {
+    let (w, h) = (image.width(), image.height());
+    let (index, y) = image
+        .texels()
+        .par_iter()
+        .map(|&t| luminance(t))
+        .enumerate()
+        .reduce(
+            || (0, f32::NEG_INFINITY),
+            |a, b| {
+                if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    let (u, v) = (
+        ((index % w) as f32 + 0.5) / w as f32,
+        ((index / w) as f32 + 0.5) / h as f32,
+    );
+    let local = match options.input_mapping {
+        Mapping::Equirectangular => equirect_to_direction(u, v).0,
+        Mapping::EqualArea => square_to_sphere(u, v),
+    };
+    let world = if options.rotation.is_identity() {
+        local
+    } else {
+        options.rotation.apply(local)
+    };
+    (y * options.scale, world)
 }

@@ -5,8 +5,8 @@
 pub mod bench;
 pub mod eval;
 pub mod importance;
-pub mod render;
 pub mod info;
+pub mod render;
 pub mod sample;
 pub mod verify;
 

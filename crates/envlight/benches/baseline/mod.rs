@@ -65,11 +65,7 @@ impl Baseline1D {
         } else {
             0.0
         };
-        (
-            (offset as f32 + du) / self.func.len() as f32,
-            pdf,
-            offset,
-        )
+        ((offset as f32 + du) / self.func.len() as f32, pdf, offset)
     }
 }
 
@@ -80,8 +76,9 @@ pub struct Baseline2D {
 
 impl Baseline2D {
     pub fn new(f: &[f32], nu: usize, nv: usize) -> Self {
-        let conditional: Vec<Baseline1D> =
-            (0..nv).map(|v| Baseline1D::new(&f[v * nu..(v + 1) * nu])).collect();
+        let conditional: Vec<Baseline1D> = (0..nv)
+            .map(|v| Baseline1D::new(&f[v * nu..(v + 1) * nu]))
+            .collect();
         let marginal_func: Vec<f32> = conditional.iter().map(|d| d.func_int).collect();
         let marginal = Baseline1D::new(&marginal_func);
         Self {
