@@ -1372,3 +1372,51 @@ fn a_closed_pipe_ends_quietly() {
         );
     }
 }
+
+#[test]
+fn eval_streams_from_an_open_stdin() {
+    // 70 000 rows (more than one read batch) go in and stdin stays open: results
+    // must come out before the input ends, so eval never holds all of its input.
+    let bin = assert_cmd::cargo::cargo_bin("envlight");
+    let mut child = std::process::Command::new(&bin)
+        .args(["eval", "--dirs", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let stdin = child.stdin.take().unwrap();
+    let (close_tx, close_rx) = std::sync::mpsc::channel::<()>();
+    let feeder = std::thread::spawn(move || {
+        use std::io::Write;
+        let mut stdin = std::io::BufWriter::new(stdin);
+        stdin.write_all(b"x,y,z\n").unwrap();
+        for k in 0..70_000 {
+            writeln!(stdin, "{},0.5,0.25", k as f32 * 1e-5).unwrap();
+        }
+        stdin.flush().unwrap();
+        // Keep the pipe open until the test has seen output.
+        let _ = close_rx.recv_timeout(std::time::Duration::from_secs(60));
+    });
+    let stdout = child.stdout.take().unwrap();
+    let (line_tx, line_rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut reader = BufReader::new(stdout);
+        let mut first = [String::new(), String::new()];
+        for line in &mut first {
+            reader.read_line(line).unwrap();
+        }
+        line_tx.send(first).unwrap();
+        // Drain the rest so the child is never blocked on a full pipe.
+        std::io::copy(&mut reader, &mut std::io::sink()).unwrap();
+    });
+    let first = line_rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("no output while stdin was still open: eval does not stream");
+    assert_eq!(first[0], "x,y,z,pdf,r,g,b\n");
+    assert!(first[1].starts_with("0,"), "{}", first[1]);
+    close_tx.send(()).unwrap();
+    feeder.join().unwrap();
+    reader.join().unwrap();
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+}
