@@ -1,6 +1,7 @@
-//! A tiny 5×7 bitmap font for labelling comparison images: A–Z (lower case is
-//! drawn as upper case), 0–9, space and `. - = % : ( ) / + ,`. Anything else is
-//! drawn as `?`.
+//! A tiny 5×7 bitmap font for labelling images (comparison sheets here, the CLI's
+//! importance pictures): A–Z (lower case is drawn as upper case), 0–9, space,
+//! `. , : - + = _ / ( ) [ ] % ?`, `×`, `°`, `θ` and `φ`. [`glyph`] draws anything
+//! else as `?`; [`try_glyph`] lets a caller choose its own stand-in.
 
 /// Glyph width in font pixels.
 pub const GLYPH_WIDTH: usize = 5;
@@ -9,9 +10,18 @@ pub const GLYPH_HEIGHT: usize = 7;
 /// Horizontal advance per character (glyph plus one pixel of spacing).
 pub const ADVANCE: usize = GLYPH_WIDTH + 1;
 
-/// Rows of the glyph for `c`, top first; bit 4 is the leftmost pixel.
-fn glyph(c: char) -> [u8; 7] {
-    match c.to_ascii_uppercase() {
+/// The `?` glyph, also drawn by [`glyph`] for characters the font lacks.
+const QUESTION_MARK: [u8; GLYPH_HEIGHT] = [0x0E, 0x11, 0x01, 0x02, 0x04, 0x00, 0x04];
+
+/// Rows of the glyph for `c`, top first; bit 4 is the leftmost pixel. Characters
+/// the font lacks are drawn as `?`.
+pub fn glyph(c: char) -> [u8; GLYPH_HEIGHT] {
+    try_glyph(c).unwrap_or(QUESTION_MARK)
+}
+
+/// Rows of the glyph for `c` as in [`glyph`], or `None` when the font has none.
+pub fn try_glyph(c: char) -> Option<[u8; GLYPH_HEIGHT]> {
+    Some(match c.to_ascii_uppercase() {
         'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
         'B' => [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E],
         'C' => [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E],
@@ -59,8 +69,16 @@ fn glyph(c: char) -> [u8; 7] {
         '/' => [0x00, 0x01, 0x02, 0x04, 0x08, 0x10, 0x00],
         '+' => [0x00, 0x04, 0x04, 0x1F, 0x04, 0x04, 0x00],
         ',' => [0x00, 0x00, 0x00, 0x00, 0x0C, 0x04, 0x08],
-        _ => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x00, 0x04],
-    }
+        '?' => QUESTION_MARK,
+        '_' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x1F],
+        '[' => [0x0E, 0x08, 0x08, 0x08, 0x08, 0x08, 0x0E],
+        ']' => [0x0E, 0x02, 0x02, 0x02, 0x02, 0x02, 0x0E],
+        '×' => [0x00, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x00],
+        '°' => [0x0C, 0x12, 0x12, 0x0C, 0x00, 0x00, 0x00],
+        'Θ' | 'θ' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x0E],
+        'Φ' | 'φ' => [0x04, 0x0E, 0x15, 0x15, 0x15, 0x0E, 0x04],
+        _ => return None,
+    })
 }
 
 /// An 8-bit RGB canvas (row-major, 3 bytes per pixel).
@@ -156,6 +174,18 @@ pub fn text_width(text: &str, scale: usize) -> usize {
     text.chars().count() * ADVANCE * scale
 }
 
+/// Width in pixels of `text` drawn at `scale` without the spacing after its last
+/// character: from the first glyph's left edge to the last glyph's right edge
+/// (0 for empty text).
+pub fn text_extent(text: &str, scale: usize) -> usize {
+    let n = text.chars().count();
+    if n == 0 {
+        0
+    } else {
+        (n * ADVANCE - 1) * scale
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +210,29 @@ mod tests {
             }
         }
         assert_eq!(glyph('a'), glyph('A'));
+    }
+
+    #[test]
+    fn glyphs_are_five_bits_wide_and_distinct() {
+        let chars = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ.,:-+=_/()[]%?×°θφ";
+        let glyphs: Vec<[u8; GLYPH_HEIGHT]> = chars.chars().map(glyph).collect();
+        for (c, g) in chars.chars().zip(&glyphs) {
+            assert!(g.iter().all(|&r| r < 32), "{c}");
+            assert!(g.iter().any(|&r| r != 0), "{c} is blank");
+        }
+        for i in 0..glyphs.len() {
+            for j in i + 1..glyphs.len() {
+                assert_ne!(
+                    glyphs[i],
+                    glyphs[j],
+                    "{} and {}",
+                    chars.chars().nth(i).unwrap(),
+                    chars.chars().nth(j).unwrap()
+                );
+            }
+        }
+        assert_eq!(glyph('a'), glyph('A'));
+        assert_eq!(text_extent("180°", 2), (4 * ADVANCE - 1) * 2);
     }
 
     #[test]

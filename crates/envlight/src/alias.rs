@@ -22,7 +22,7 @@
 //!
 //! [`Distribution2D`]: crate::distribution::Distribution2D
 
-use crate::distribution::{Sample2D, ONE_MINUS_EPSILON};
+use crate::distribution::{cell_index, place_in_cell_f64, sanitize, Sample2D};
 
 /// `2⁴⁸`: the two 24-bit halves of `ξ` form a 48-bit fixed-point number.
 const TWO_POW_48: f64 = (1u64 << 48) as f64;
@@ -178,7 +178,7 @@ impl AliasTable2D {
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
     #[inline]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf(cell_of(uv[0], self.nu), cell_of(uv[1], self.nv))
+        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`] in O(1).
@@ -215,8 +215,8 @@ impl AliasTable2D {
         );
         Sample2D {
             uv: [
-                point_in_cell(iu, du, self.nu),
-                point_in_cell(iv, dv, self.nv),
+                place_in_cell_f64(iu, du, self.nu),
+                place_in_cell_f64(iv, dv, self.nv),
             ],
             pdf: self.index_pdf(index),
             cell: [iu, iv],
@@ -292,39 +292,6 @@ fn fixed_24(xi: f32) -> u64 {
     ((xi * (1u32 << 24) as f32) as u32).min((1 << 24) - 1) as u64
 }
 
-/// A value usable as a density: finite and positive, otherwise 0.
-#[inline]
-fn sanitize(value: f32) -> f32 {
-    if value > 0.0 && value.is_finite() {
-        value
-    } else {
-        0.0
-    }
-}
-
-/// The cell of `n` holding `x`, computed exactly as the pdf lookups do.
-#[inline]
-fn cell_of(x: f32, n: usize) -> usize {
-    ((x * n as f32).max(0.0) as usize).min(n - 1)
-}
-
-/// `(i + d) / n` as an `f32` below 1 that [`cell_of`] places in cell `i`: rounding
-/// can carry a point at the far edge of a cell into the next one, which would make
-/// the pdf looked up at the point disagree with the cell that was sampled.
-#[inline]
-fn point_in_cell(i: usize, d: f64, n: usize) -> f32 {
-    let mut x = (((i as f64) + d) / n as f64) as f32;
-    x = x.min(ONE_MINUS_EPSILON);
-    for _ in 0..4 {
-        match cell_of(x, n).cmp(&i) {
-            std::cmp::Ordering::Greater => x = f32::from_bits(x.to_bits() - 1),
-            std::cmp::Ordering::Less => x = f32::from_bits(x.to_bits() + 1),
-            std::cmp::Ordering::Equal => break,
-        }
-    }
-    x
-}
-
 /// Test helpers shared by the sampler tests of this crate: a chi-square
 /// goodness-of-fit test and a per-call timer.
 #[cfg(test)]
@@ -395,7 +362,7 @@ pub(crate) mod test_support {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::distribution::Distribution2D;
+    use crate::distribution::{Distribution2D, ONE_MINUS_EPSILON};
     use crate::rng::{xi_2d, SplitMix64};
 
     /// Significance level of every chi-square test here.
@@ -425,7 +392,10 @@ mod tests {
         for k in 0..n {
             let s = t.sample_continuous(xi_2d(seed, k));
             assert_eq!(t.pdf(s.uv), s.pdf);
-            assert_eq!([cell_of(s.uv[0], t.nu), cell_of(s.uv[1], t.nv)], s.cell);
+            assert_eq!(
+                [cell_index(s.uv[0], t.nu), cell_index(s.uv[1], t.nv)],
+                s.cell
+            );
             assert!(s.uv[0] < 1.0 && s.uv[1] < 1.0);
             counts[s.cell[1] * t.nu + s.cell[0]] += 1;
         }

@@ -31,7 +31,7 @@
 //! `x = ξ (a + b) / (a + √((1 - ξ) a² + ξ b²))`: the root of the quadratic CDF written
 //! without cancellation, exact when `a = b` (x = ξ) and when `a = 0` (x = √ξ).
 
-use crate::distribution::{Sample2D, ONE_MINUS_EPSILON};
+use crate::distribution::{sanitize, Sample2D, ONE_MINUS_EPSILON};
 use crate::error::{Error, Result};
 
 /// The largest `f64` below 1.
@@ -520,16 +520,6 @@ fn unit_closed(x: f32) -> f64 {
 fn unit_open(x: f32) -> f64 {
     if x > 0.0 {
         (x as f64).min(ONE_MINUS_EPSILON_F64)
-    } else {
-        0.0
-    }
-}
-
-/// A value usable as a density: finite and positive, otherwise 0.
-#[inline]
-fn sanitize(value: f32) -> f32 {
-    if value > 0.0 && value.is_finite() {
-        value
     } else {
         0.0
     }

@@ -82,8 +82,24 @@ pub(crate) fn cell_index(x: f32, n: usize) -> usize {
 /// density, which can differ from the sampled cell's by any factor.
 #[inline]
 pub(crate) fn place_in_cell(cell: usize, frac: f32, n: usize) -> f32 {
-    let mut x = ((cell as f32 + frac) / n as f32).min(ONE_MINUS_EPSILON);
-    for _ in 0..8 {
+    let x = ((cell as f32 + frac) / n as f32).min(ONE_MINUS_EPSILON);
+    nudge_into_cell(x, cell, n, 8)
+}
+
+/// [`place_in_cell`] with the offset in `f64`: `(cell + frac) / n` is computed in
+/// `f64` and rounded to `f32` once, then nudged the same way (up to 4 ulps). Used
+/// by the samplers whose in-cell offsets carry more than 24 bits.
+#[inline]
+pub(crate) fn place_in_cell_f64(cell: usize, frac: f64, n: usize) -> f32 {
+    let x = (((cell as f64) + frac) / n as f64) as f32;
+    nudge_into_cell(x.min(ONE_MINUS_EPSILON), cell, n, 4)
+}
+
+/// Steps `x` by single ulps, at most `tries` times, until [`cell_index`] puts it
+/// in `cell`.
+#[inline]
+fn nudge_into_cell(mut x: f32, cell: usize, n: usize, tries: usize) -> f32 {
+    for _ in 0..tries {
         match cell_index(x, n).cmp(&cell) {
             std::cmp::Ordering::Greater => x = x.next_down(),
             std::cmp::Ordering::Less => x = x.next_up(),
@@ -124,7 +140,7 @@ fn build_cdf(f: &[f32], cdf: &mut [f32]) -> f64 {
 }
 
 /// `1 / x` for a positive integral, 0 otherwise (a zero function has pdf 0).
-fn inverse_or_zero(x: f64) -> f64 {
+pub(crate) fn inverse_or_zero(x: f64) -> f64 {
     if x > 0.0 && x.is_finite() {
         1.0 / x
     } else {
@@ -134,7 +150,7 @@ fn inverse_or_zero(x: f64) -> f64 {
 
 /// A value usable as a density: finite and positive, otherwise 0.
 #[inline]
-fn sanitize(value: f32) -> f32 {
+pub(crate) fn sanitize(value: f32) -> f32 {
     if value > 0.0 && value.is_finite() {
         value
     } else {

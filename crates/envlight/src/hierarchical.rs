@@ -23,7 +23,9 @@
 //! is what inversion with row CDFs also achieves but an alias table does not. The
 //! warp is invertible step by step ([`Hierarchical2D::invert`]).
 
-use crate::distribution::{Sample2D, ONE_MINUS_EPSILON};
+use crate::distribution::{
+    cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D, ONE_MINUS_EPSILON,
+};
 
 /// The largest `f64` below 1: rescaled sample coordinates stay in `[0, 1)`.
 const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
@@ -119,11 +121,7 @@ impl Hierarchical2D {
         // The same summation order as Distribution2D, so pdfs agree to the bit.
         let integral = row_sums.iter().map(|&s| s / nu as f64).sum::<f64>() / nv as f64;
         let total: f64 = row_sums.iter().sum();
-        let normalise = if total > 0.0 && total.is_finite() {
-            1.0 / total
-        } else {
-            0.0
-        };
+        let normalise = inverse_or_zero(total);
 
         // Halvings of each side from the padded cells (W, H) up to the root: both
         // while both exceed 1, then the longer one alone. A 1×1 grid still gets
@@ -234,7 +232,7 @@ impl Hierarchical2D {
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
     #[inline]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf(cell_of(uv[0], self.nu), cell_of(uv[1], self.nv))
+        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// The block `[a, b, c, d]` starting at `index`; zeros past the end (a
@@ -294,8 +292,8 @@ impl Hierarchical2D {
         let (x, y) = (x.min(self.nu - 1), y.min(self.nv - 1));
         Sample2D {
             uv: [
-                point_in_cell(x, xi0, self.nu),
-                point_in_cell(y, xi1, self.nv),
+                place_in_cell_f64(x, xi0, self.nu),
+                place_in_cell_f64(y, xi1, self.nv),
             ],
             pdf: self.cell_pdf(x, y),
             cell: [x, y],
@@ -311,7 +309,7 @@ impl Hierarchical2D {
         Sample2D {
             uv,
             pdf: 0.0,
-            cell: [cell_of(uv[0], self.nu), cell_of(uv[1], self.nv)],
+            cell: [cell_index(uv[0], self.nu), cell_index(uv[1], self.nv)],
         }
     }
 
@@ -324,7 +322,7 @@ impl Hierarchical2D {
         if self.integral <= 0.0 {
             return [unit(uv[0]) as f32, unit(uv[1]) as f32];
         }
-        let (mut x, mut y) = (cell_of(uv[0], self.nu), cell_of(uv[1], self.nv));
+        let (mut x, mut y) = (cell_index(uv[0], self.nu), cell_index(uv[1], self.nv));
         let mut xi0 = (unit(uv[0]) * self.nu as f64 - x as f64).clamp(0.0, 1.0);
         let mut xi1 = (unit(uv[1]) * self.nv as f64 - y as f64).clamp(0.0, 1.0);
         for step in self.steps.iter().rev() {
@@ -387,38 +385,6 @@ fn unit(xi: f32) -> f64 {
     } else {
         0.0
     }
-}
-
-/// A value usable as a density: finite and positive, otherwise 0.
-#[inline]
-fn sanitize(value: f32) -> f32 {
-    if value > 0.0 && value.is_finite() {
-        value
-    } else {
-        0.0
-    }
-}
-
-/// The cell of `n` holding `x`, computed exactly as the pdf lookups do.
-#[inline]
-fn cell_of(x: f32, n: usize) -> usize {
-    ((x * n as f32).max(0.0) as usize).min(n - 1)
-}
-
-/// `(i + d) / n` as an `f32` below 1 that [`cell_of`] places in cell `i` (rounding
-/// could otherwise carry a point on a cell's far edge into the next cell).
-#[inline]
-fn point_in_cell(i: usize, d: f64, n: usize) -> f32 {
-    let mut x = (((i as f64) + d) / n as f64) as f32;
-    x = x.min(ONE_MINUS_EPSILON);
-    for _ in 0..4 {
-        match cell_of(x, n).cmp(&i) {
-            std::cmp::Ordering::Greater => x = f32::from_bits(x.to_bits() - 1),
-            std::cmp::Ordering::Less => x = f32::from_bits(x.to_bits() + 1),
-            std::cmp::Ordering::Equal => break,
-        }
-    }
-    x
 }
 
 #[cfg(test)]
@@ -528,7 +494,10 @@ mod tests {
         for xi in xis {
             let s = h.sample_continuous(xi);
             assert_eq!(h.pdf(s.uv), s.pdf);
-            assert_eq!([cell_of(s.uv[0], h.nu), cell_of(s.uv[1], h.nv)], s.cell);
+            assert_eq!(
+                [cell_index(s.uv[0], h.nu), cell_index(s.uv[1], h.nv)],
+                s.cell
+            );
             counts[s.cell[1] * h.nu + s.cell[0]] += 1;
         }
         counts

@@ -5,8 +5,6 @@
 //! space (so `--rotate` shows), both with θ ticks down the left side and φ ticks
 //! along the bottom. Sample directions, when asked for, are dots on both panels.
 
-mod font;
-
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
@@ -15,6 +13,7 @@ use envlight::color::{linear_to_srgb, luminance};
 use envlight::light::Mapping;
 use envlight::mapping::{direction_to_equirect, equirect_to_direction};
 use envlight::EnvironmentLight;
+use envlight_render::font;
 use image::ImageEncoder;
 use rayon::prelude::*;
 
@@ -335,16 +334,16 @@ struct Layout {
 
 impl Layout {
     fn new(panel_w: usize, panel_h: usize, scale: usize) -> Self {
-        let line = (font::GLYPH_H + 3) * scale;
+        let line = (font::GLYPH_HEIGHT + 3) * scale;
         let tick = 4 * scale;
         // θ axis: "θ" then labels like "180°" then the tick.
-        let left = font::text_width("θ 180°", scale) + tick + 6 * scale;
+        let left = font::text_extent("θ 180°", scale) + tick + 6 * scale;
         let top1 = 2 * line;
         // Below a panel: tick, φ labels, the axis name, then the next title.
         let below = tick + 2 * line + line / 2;
         let top2 = top1 + panel_h + below + line;
         let right =
-            8 * scale + 10 * scale + 4 * scale + font::text_width("1E-10", scale) + 8 * scale;
+            8 * scale + 10 * scale + 4 * scale + font::text_extent("1E-10", scale) + 8 * scale;
         Self {
             width: left + panel_w + right,
             height: top2 + panel_h + below,
@@ -358,9 +357,12 @@ impl Layout {
     }
 
     fn title_gap(&self) -> usize {
-        (font::GLYPH_H + 4) * self.scale
+        (font::GLYPH_HEIGHT + 4) * self.scale
     }
 }
+
+/// Drawn for characters the font lacks: a hollow box.
+const MISSING_GLYPH: [u8; font::GLYPH_HEIGHT] = [0x1F, 0x11, 0x11, 0x11, 0x11, 0x11, 0x1F];
 
 /// An RGB8 image being drawn.
 struct Canvas {
@@ -409,9 +411,10 @@ impl Canvas {
     fn text(&mut self, x: usize, y: usize, text: &str, scale: usize, c: [u8; 3]) {
         for (n, ch) in text.chars().enumerate() {
             let gx = x + n * font::ADVANCE * scale;
-            for (row, bits) in font::glyph(ch).iter().enumerate() {
-                for col in 0..font::GLYPH_W {
-                    if bits & (1 << (font::GLYPH_W - 1 - col)) != 0 {
+            let rows = font::try_glyph(ch).unwrap_or(MISSING_GLYPH);
+            for (row, bits) in rows.iter().enumerate() {
+                for col in 0..font::GLYPH_WIDTH {
+                    if bits & (1 << (font::GLYPH_WIDTH - 1 - col)) != 0 {
                         self.fill(gx + col * scale, y + row * scale, scale, scale, c);
                     }
                 }
@@ -439,12 +442,12 @@ impl Canvas {
         self.fill(left - 1, top + h, w + 2, 1, DIM);
         self.fill(left - 1, top - 1, 1, h + 2, DIM);
         self.fill(left + w, top - 1, 1, h + 2, DIM);
-        let glyph_h = font::GLYPH_H * s;
+        let glyph_h = font::GLYPH_HEIGHT * s;
         for theta in (0..=180).step_by(30) {
             let y = top + ((theta as f64 / 180.0) * (h - 1) as f64).round() as usize;
             self.fill(left - 1 - tick, y, tick, s, DIM);
             let label = format!("{theta}°");
-            let lw = font::text_width(&label, s);
+            let lw = font::text_extent(&label, s);
             let ty = (y + s / 2)
                 .saturating_sub(glyph_h / 2)
                 .clamp(top.saturating_sub(glyph_h / 2), top + h - glyph_h / 2);
@@ -453,7 +456,7 @@ impl Canvas {
         // The axis name, halfway down, left of the labels.
         self.text(s, top + h / 2 + 8 * s, "θ", s, INK);
         // φ: the widest spacing that still leaves room between labels.
-        let label_w = font::text_width("360°", s) as f64;
+        let label_w = font::text_extent("360°", s) as f64;
         let step = [45, 90, 180]
             .into_iter()
             .find(|&d| d as f64 / 360.0 * w as f64 >= 1.5 * label_w)
@@ -462,15 +465,15 @@ impl Canvas {
             let x = left + ((phi as f64 / 360.0) * (w - 1) as f64).round() as usize;
             self.fill(x, top + h + 1, s, tick, DIM);
             let label = format!("{phi}°");
-            let lw = font::text_width(&label, s);
+            let lw = font::text_extent(&label, s);
             let lx = x
                 .saturating_sub(lw / 2)
                 .clamp(left.saturating_sub(lw / 2), left + w - lw / 2);
             self.text(lx, top + h + 1 + tick + 2 * s, &label, s, INK);
         }
-        let name_y = top + h + 1 + tick + 2 * s + (font::GLYPH_H + 3) * s;
+        let name_y = top + h + 1 + tick + 2 * s + (font::GLYPH_HEIGHT + 3) * s;
         self.text(
-            left + w / 2 - font::text_width("φ", s) / 2,
+            left + w / 2 - font::text_extent("φ", s) / 2,
             name_y,
             "φ",
             s,
@@ -494,7 +497,7 @@ impl Canvas {
         self.fill(x - 1, top + h + 4 * s - 1, bar_w + 2, 1, DIM);
         self.fill(x - 1, top + h + 4 * s + swatch, bar_w + 2, 1, DIM);
         let label_x = x + bar_w + 4 * s;
-        let glyph_h = font::GLYPH_H * s;
+        let glyph_h = font::GLYPH_HEIGHT * s;
         self.text(
             label_x,
             top + h + 4 * s + swatch / 2 - glyph_h / 2,
