@@ -175,6 +175,28 @@ impl EnvImage {
         self.texels[y * self.width + x]
     }
 
+    /// The brightest texel by luminance, the first in row order among equals:
+    /// `(x, y, Y)`. Parallel; the result does not depend on the thread count.
+    pub fn brightest_texel(&self) -> (usize, usize, f32) {
+        use rayon::prelude::*;
+        let (index, y) = self
+            .texels
+            .par_iter()
+            .map(|&t| crate::color::luminance(t))
+            .enumerate()
+            .reduce(
+                || (0, f32::NEG_INFINITY),
+                |a, b| {
+                    if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
+                        b
+                    } else {
+                        a
+                    }
+                },
+            );
+        (index % self.width, index / self.width, y)
+    }
+
     /// Radiance at `(u, v)` with the given reconstruction; u wraps, v clamps.
     #[inline]
     pub fn lookup(&self, u: f32, v: f32, mode: Lookup) -> [f32; 3] {
@@ -298,6 +320,21 @@ mod tests {
             3.0
         );
         assert!((img.lookup_wrapped(0.5, 0.25, mode, WrapU::Clamp)[0] - 1.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn brightest_texel_is_the_first_maximum_in_row_order() {
+        let img = EnvImage::from_fn(5, 3, |x, y| {
+            if (x, y) == (3, 1) || (x, y) == (1, 2) {
+                [2.0; 3]
+            } else {
+                [1.0; 3]
+            }
+        })
+        .unwrap();
+        let (x, y, lum) = img.brightest_texel();
+        assert_eq!((x, y), (3, 1));
+        assert!((lum - 2.0).abs() < 1e-5);
     }
 
     #[test]

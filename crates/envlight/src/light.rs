@@ -558,26 +558,8 @@ impl EnvironmentLight {
     /// its centre.
     pub fn brightest(&self) -> (f32, Vec3) {
         let (w, h) = (self.image.width(), self.image.height());
-        let (index, y) = self
-            .image
-            .texels()
-            .par_iter()
-            .map(|&t| luminance(t))
-            .enumerate()
-            .reduce(
-                || (0, f32::NEG_INFINITY),
-                |a, b| {
-                    if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
-                        b
-                    } else {
-                        a
-                    }
-                },
-            );
-        let uv = [
-            ((index % w) as f32 + 0.5) / w as f32,
-            ((index / w) as f32 + 0.5) / h as f32,
-        ];
+        let (x, row, y) = self.image.brightest_texel();
+        let uv = [(x as f32 + 0.5) / w as f32, (row as f32 + 0.5) / h as f32];
         (y * self.options.scale, self.uv_to_direction(uv))
     }
 

@@ -4,12 +4,10 @@ use std::io::Write;
 use std::time::Instant;
 
 use anyhow::Context;
-use envlight::color::luminance;
 use envlight::equal_area::square_to_sphere;
 use envlight::light::Mapping;
 use envlight::mapping::equirect_to_direction;
 use envlight::{EnvImage, LightOptions, Vec3};
-use rayon::prelude::*;
 use serde_json::json;
 
 use super::Outcome;
@@ -223,25 +221,8 @@ pub fn angles_degrees(d: [f32; 3]) -> (f64, f64) {
 /// and the world direction of its centre.
 fn brightest_texel(image: &EnvImage, options: &LightOptions) -> (f32, Vec3) {
     let (w, h) = (image.width(), image.height());
-    let (index, y) = image
-        .texels()
-        .par_iter()
-        .map(|&t| luminance(t))
-        .enumerate()
-        .reduce(
-            || (0, f32::NEG_INFINITY),
-            |a, b| {
-                if b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
-                    b
-                } else {
-                    a
-                }
-            },
-        );
-    let (u, v) = (
-        ((index % w) as f32 + 0.5) / w as f32,
-        ((index / w) as f32 + 0.5) / h as f32,
-    );
+    let (x, row, y) = image.brightest_texel();
+    let (u, v) = ((x as f32 + 0.5) / w as f32, (row as f32 + 0.5) / h as f32);
     let local = match options.input_mapping {
         Mapping::Equirectangular => equirect_to_direction(u, v).0,
         Mapping::EqualArea => square_to_sphere(u, v),
