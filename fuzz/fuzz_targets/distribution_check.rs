@@ -32,13 +32,20 @@ fn check_distribution(data: &[u8]) {
         let s = d1.sample_continuous(xi[0]);
         assert!((0.0..1.0).contains(&s.x) && s.pdf.is_finite() && s.pdf >= 0.0);
         if d1.integral() > 0.0 {
-            assert!(d1.func()[s.cell] > 0.0, "sampled a zero cell");
+            let v = values[s.cell];
+            assert!(v > 0.0 && v.is_finite(), "sampled a zero cell");
+            assert!(s.pdf > 0.0, "a positive cell with pdf 0");
         }
         assert!((0.0..=1.0).contains(&d1.invert(s.x)));
         let s = d2.sample_continuous(xi);
         assert!(s.uv.iter().all(|c| (0.0..1.0).contains(c)));
         assert!(s.pdf.is_finite() && s.pdf >= 0.0);
         assert_eq!(d2.pdf(s.uv), s.pdf);
+        if d2.integral() > 0.0 {
+            let v = values[s.cell[1] * nu + s.cell[0]];
+            assert!(v > 0.0 && v.is_finite(), "sampled a zero cell");
+            assert!(s.pdf > 0.0, "a positive cell with pdf 0");
+        }
     }
 
     // The same values as luminance of a grey map (non-finite and negative texels

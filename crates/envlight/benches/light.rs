@@ -130,6 +130,27 @@ fn bench_queries(c: &mut Criterion) {
     });
     group.finish();
 
+    // The planar sampler alone, on the same importance: the CDF search and placement
+    // without the mapping to a direction or the radiance lookup.
+    let planar = envlight::Distribution2D::new(base.importance(), width);
+    let mut group = c.benchmark_group("sample2d");
+    group.throughput(Throughput::Elements(QUERIES as u64));
+    group.bench_function("baseline", |b| {
+        b.iter(|| {
+            xi.iter()
+                .map(|&x| base.distribution().sample_continuous(black_box(x)).1)
+                .sum::<f32>()
+        })
+    });
+    group.bench_function("envlight", |b| {
+        b.iter(|| {
+            xi.iter()
+                .map(|&x| planar.sample_continuous(black_box(x)).pdf)
+                .sum::<f32>()
+        })
+    });
+    group.finish();
+
     let mut group = c.benchmark_group("pdf");
     group.throughput(Throughput::Elements(QUERIES as u64));
     group.bench_function("baseline", |b| {

@@ -13,7 +13,8 @@
 //!
 //! A sample draws a slot uniformly, makes the keep-or-alias test, and places the
 //! point uniformly inside the chosen cell, so `p(u, v) = f[cell] / I` with
-//! `I = Σ f / (nu nv)`: the density of [`Distribution2D`], value for value.
+//! `I = Σ f / (nu nv)`: the density of [`Distribution2D`], which matches it to
+//! within its CDFs' 2⁻³² resolution.
 //!
 //! **Trade-off.** Sampling is O(1) (one table entry and one function value are read)
 //! where inversion needs two binary searches, but the map from `ξ` to the point is
@@ -41,7 +42,8 @@ struct Slot {
 ///
 /// Guarantees: a cell with `f = 0` is never sampled (its threshold is 0 and no slot
 /// aliases to it); `pdf(sample_continuous(ξ).uv)` equals the returned pdf; the pdf of
-/// every cell is bit-identical to [`Distribution2D::cell_pdf`] for the same input.
+/// every cell is `f / I` to f32 rounding, the density [`Distribution2D::cell_pdf`]
+/// gives to within its CDFs' resolution.
 ///
 /// Cost: sampling O(1) (the slot and the chosen cell's value: two memory reads);
 /// build O(n) time with `16 n` bytes of temporary memory. Memory: 12 bytes per cell
@@ -94,7 +96,7 @@ impl AliasTable2D {
         let n = f.len();
         let nv = n / nu;
         let func: Vec<f32> = f.iter().map(|&x| sanitize(x)).collect();
-        // The same summation order as Distribution2D, so pdfs agree to the bit.
+        // The same summation order as Distribution2D, so the integrals agree to the bit.
         let integral = func
             .chunks(nu)
             .map(|row| row.iter().map(|&x| x as f64).sum::<f64>() / nu as f64)
@@ -298,6 +300,38 @@ fn fixed_24(xi: f32) -> u64 {
 pub(crate) mod test_support {
     use statrs::distribution::{ChiSquared, ContinuousCDF};
 
+    /// Checks a sampler's cell pdfs against `f / I` to f32 rounding, and the
+    /// inversion sampler's against the same to its CDFs' resolution (each edge is
+    /// rounded by at most half a unit, so a cell of widths `wu`, `wv` is within
+    /// `1/wu + 1/wv` relative); `pdf` at each cell centre must be the cell pdf.
+    pub(crate) fn assert_pdf_is_f_over_integral(
+        f: &[f32],
+        nu: usize,
+        cell_pdf: impl Fn(usize, usize) -> f32,
+        pdf: impl Fn([f32; 2]) -> f32,
+    ) {
+        let nv = f.len() / nu;
+        let inversion = crate::distribution::Distribution2D::new(f, nu);
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let exact = (f[iv * nu + iu] as f64 / inversion.integral()) as f32;
+                let mine = cell_pdf(iu, iv);
+                assert!((mine - exact).abs() <= 1e-6 * exact, "{mine} vs {exact}");
+                let (row, marginal) = (inversion.row_cdf(iv), inversion.marginal().cdf());
+                let wu = (row[iu + 1] - row[iu]) as f32;
+                let wv = (marginal[iv + 1] - marginal[iv]) as f32;
+                let bound = (1.0 / wu + 1.0 / wv + 1e-6) * exact;
+                let theirs = inversion.cell_pdf(iu, iv);
+                assert!(
+                    theirs == exact || (theirs - exact).abs() <= bound,
+                    "{theirs} vs {exact}"
+                );
+                let uv = [(iu as f32 + 0.5) / nu as f32, (iv as f32 + 0.5) / nv as f32];
+                assert_eq!(pdf(uv), mine);
+            }
+        }
+    }
+
     /// Pearson's statistic of `observed` counts against `expected` counts, pooling
     /// bins with an expected count below 5 (samples in a bin of expected count 0
     /// make the p-value 0). Returns `(statistic, degrees of freedom, p-value)`.
@@ -453,13 +487,12 @@ mod tests {
             let alias = AliasTable2D::new(&f, nu);
             let inversion = Distribution2D::new(&f, nu);
             assert_eq!(alias.integral(), inversion.integral());
-            for iv in 0..nv {
-                for iu in 0..nu {
-                    assert_eq!(alias.cell_pdf(iu, iv), inversion.cell_pdf(iu, iv));
-                    let uv = [(iu as f32 + 0.5) / nu as f32, (iv as f32 + 0.5) / nv as f32];
-                    assert_eq!(alias.pdf(uv), inversion.pdf(uv));
-                }
-            }
+            test_support::assert_pdf_is_f_over_integral(
+                &f,
+                nu,
+                |iu, iv| alias.cell_pdf(iu, iv),
+                |uv| alias.pdf(uv),
+            );
         }
     }
 

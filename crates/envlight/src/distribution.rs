@@ -2,70 +2,126 @@
 //! by inverting their cumulative distribution functions.
 //!
 //! A 1D distribution is built from `n` non-negative values `f[0..n)`, each constant
-//! over a cell of width `1/n`:
+//! over a cell of width `1/n`. Its CDF is stored in fixed point, as integers on
+//! `0..=CDF_ONE`:
 //!
 //! ```text
-//! cdf[0] = 0,   cdf[i] = cdf[i-1] + f[i-1]/n,   integral = cdf[n],   cdf /= integral
-//! pdf(x) = f[⌊x n⌋] / integral
+//! c[0] = 0,   c[i] = round(CDF_ONE · Σ_{k<i} f[k] / Σ f),   c[n] = CDF_ONE
+//! w[i] = c[i+1] - c[i]                      (the cell's width, in CDF units)
+//! sample: x = (o + (ξ·CDF_ONE - c[o]) / w[o]) / n   for the o with c[o] <= ξ·CDF_ONE < c[o+1]
+//! pdf(x) = n · w[⌊x n⌋] / CDF_ONE
 //! ```
 //!
-//! Prefix sums are accumulated in `f64` and the normalised CDF is stored in `f32`
-//! with `cdf[n] == 1` exactly, so a row of 16 384 texels with a dynamic range of
-//! 10¹⁰ keeps every non-zero cell reachable. A function that is zero everywhere (or
-//! has no finite positive mass) gives a uniform CDF and a pdf of 0 everywhere; callers
-//! must read "pdf 0" as "no sample".
+//! The pdf is read from the stored CDF, not from `f`: it is the exact density of the
+//! sampling procedure, so `pdf(sample(ξ).x) == sample(ξ).pdf` to the bit and the
+//! pdf integrates to 1 exactly (the widths telescope). Prefix sums are accumulated
+//! in `f64`; the rounding to 2⁻³² differs from `f / Σ f` by at most 2⁻³² per cell,
+//! so the pdf of a cell holding a fraction `m` of its row's mass is within
+//! `2⁻³² / m` of `f / ∫f` (10⁻⁶ relative for a uniform row of 4096 cells; an f32
+//! CDF would be 256 times coarser near its end). A cell with `f > 0` always gets a
+//! width of at least 1, so the support is exactly the cells with `f > 0`, however
+//! wide the dynamic range: a 10⁻³⁰ texel next to a 10³⁰ sun is still sampled, with
+//! a pdf that says how rarely.
 //!
-//! The 2D distribution stores one conditional CDF per row in a single flat array (no
-//! per-row allocation) plus a marginal distribution over the rows' integrals.
-//! Memory: 1D, 8 bytes per cell; 2D, 8 bytes per cell plus 8 per row.
+//! Each CDF carries a guide table (the cutpoint method of Chen and Asau, 1974): for
+//! `K` equal slices of `[0, CDF_ONE)`, the first cell that a `ξ` in the slice can
+//! land in. Sampling reads one guide entry and then steps forward over at most a few
+//! cells, `n / K < 4` on average, in place of a binary search whose ~log₂ n
+//! branches each mispredict half the time on random `ξ`.
+//!
+//! A function that is zero everywhere (or has no finite positive mass) gets a
+//! uniform CDF and a pdf of 0 everywhere; callers read "pdf 0" as "no sample".
+//!
+//! The 2D distribution stores one conditional CDF and guide table per row in two
+//! flat arrays (no per-row allocation), plus a marginal distribution over the rows'
+//! integrals. Memory per cell: 4 bytes of CDF plus 1 to 2 bytes of guide table.
 
-/// The search that finds the CDF segment holding `xi`: the last index `o` with
-/// `cdf[o] <= xi`, clamped to `[0, n-1]` where `n = cdf.len() - 1`.
-///
-/// Zero-width segments (cells with `f = 0`) are skipped because a later entry with
-/// the same CDF value is preferred, so such cells are never returned for `xi < 1`.
-///
-/// A branchy bisection on purpose: light samples concentrate on a few bright rows
-/// and cells, where its branches predict well and the CPU runs ahead of the loads;
-/// the branchless `partition_point` waits for every load and measured 1.6× slower
-/// per sample on a 4k sky.
+use crate::math::{floor_index, len_f32, len_f64};
+
+/// The fixed-point value of a CDF at 1: CDFs run over the integers `0..=CDF_ONE`.
+pub const CDF_ONE: u32 = u32::MAX;
+
+/// The largest `f32` below 1: continuous samples stay in `[0, 1)`.
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// `ξ ∈ [0, 1)` on the CDF's fixed-point scale: the integer part (for the search,
+/// at most `CDF_ONE - 1`) and the exact product (for the offset within the cell).
+/// Values outside `[0, 1)`, and NaN, are clamped onto it.
 #[inline]
-fn find_segment(cdf: &[f32], xi: f32) -> usize {
-    let n = cdf.len() - 1;
-    // Invariant: cdf[lo] <= xi (or lo = 0), and the answer is below hi.
-    let (mut lo, mut hi) = (0usize, n);
-    while hi - lo > 1 {
-        let mid = lo + (hi - lo) / 2;
-        if cdf[mid] <= xi {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
+fn to_fixed(xi: f32) -> (u32, f64) {
+    // `max` also maps NaN to 0.
+    let t = (xi as f64 * CDF_ONE as f64)
+        .max(0.0)
+        .min((CDF_ONE - 1) as f64);
+    // SAFETY: t is finite and in [0, 2³² - 2], where truncation to u32 is defined
+    // (and is the floor).
+    (unsafe { t.to_int_unchecked::<u32>() }, t)
+}
+
+/// log₂ of the number of guide entries for a CDF of `n` cells: the largest power of
+/// two at most `n / 2` (at least 1), so a guide table costs at most 2 bytes per
+/// cell and a slice spans fewer than 4 cells on average.
+#[inline]
+fn guide_bits(n: usize) -> u32 {
+    (n / 2).max(1).ilog2()
+}
+
+/// A CDF with its guide table, borrowed from a distribution's storage.
+#[derive(Clone, Copy)]
+struct GuidedCdf<'a> {
+    /// `n + 1` fixed-point values from 0 to [`CDF_ONE`].
+    cdf: &'a [u32],
+    /// `guide[k]`: the last cell `o` with `cdf[o] <= k << shift`.
+    guide: &'a [u32],
+    /// `32 - log₂(guide.len())`: the shift from a fixed-point `ξ` to its slice.
+    shift: u32,
+}
+
+impl GuidedCdf<'_> {
+    /// Number of cells.
+    #[inline]
+    fn len(&self) -> usize {
+        self.cdf.len() - 1
     }
-    lo
-}
 
-/// Continuous sample of one CDF: returns `(segment, offset in segment)`.
-#[inline]
-fn sample_segment(cdf: &[f32], xi: f32) -> (usize, f32) {
-    let o = find_segment(cdf, xi);
-    let (lo, hi) = (cdf[o], cdf[o + 1]);
-    let width = hi - lo;
-    let du = if width > 0.0 {
-        ((xi - lo) / width).clamp(0.0, ONE_MINUS_EPSILON)
-    } else {
-        0.0
-    };
-    (o, du)
-}
+    /// Width of cell `o` in CDF units (0 for a cell with `f = 0`).
+    #[inline]
+    fn width(&self, o: usize) -> u32 {
+        self.cdf[o + 1] - self.cdf[o]
+    }
 
-/// Inverse of [`sample_segment`] for a point `x ∈ [0, 1]` on a CDF with `n` cells.
-#[inline]
-fn invert_segment(cdf: &[f32], x: f32) -> f32 {
-    let n = cdf.len() - 1;
-    let o = cell_index(x, n);
-    let frac = (x * n as f32 - o as f32).clamp(0.0, 1.0);
-    (cdf[o] + frac * (cdf[o + 1] - cdf[o])).clamp(0.0, 1.0)
+    /// The cell `o` with `cdf[o] <= x < cdf[o + 1]`, for `x < CDF_ONE`. Cells of zero
+    /// width never satisfy this, so they are never returned.
+    #[inline]
+    fn find(&self, x: u32) -> usize {
+        let mut o = self.guide[(x as u64 >> self.shift) as usize] as usize;
+        // Ends by cdf[n] = CDF_ONE > x at the latest.
+        while self.cdf[o + 1] <= x {
+            o += 1;
+        }
+        o
+    }
+
+    /// Continuous sample: the cell, the offset in `[0, 1)` within it, and its width.
+    #[inline]
+    fn sample(&self, xi: f32) -> (usize, f64, u32) {
+        let (x, t) = to_fixed(xi);
+        let o = self.find(x);
+        let lo = self.cdf[o];
+        let width = self.cdf[o + 1] - lo;
+        // t < cdf[o + 1] because ⌊t⌋ = x is, so the offset stays below 1.
+        (o, (t - lo as f64) / width as f64, width)
+    }
+
+    /// The `ξ` that [`Self::sample`] maps to the point `x ∈ [0, 1]`.
+    #[inline]
+    fn invert(&self, x: f32) -> f32 {
+        let n = self.len();
+        let o = cell_index(x, n);
+        let frac = (x as f64 * n as f64 - o as f64).clamp(0.0, 1.0);
+        let t = self.cdf[o] as f64 + frac * self.width(o) as f64;
+        ((t / CDF_ONE as f64) as f32).clamp(0.0, 1.0)
+    }
 }
 
 /// The cell of `x ∈ [0, 1]` on a grid of `n` cells, `⌊x n⌋` clamped to `[0, n-1]`.
@@ -73,33 +129,18 @@ fn invert_segment(cdf: &[f32], x: f32) -> f32 {
 /// function, so they agree about which cell a point is in.
 #[inline]
 pub(crate) fn cell_index(x: f32, n: usize) -> usize {
-    ((x * n as f32).max(0.0) as usize).min(n - 1)
+    floor_index(x * len_f32(n), n)
 }
 
-/// The point `(cell + frac) / n`, nudged by an ulp or two where f32 rounding would
-/// put it on a neighbouring cell (e.g. `frac` just below 1 rounds `cell + frac` up
-/// to `cell + 1`). Without this, `pdf(sample.x)` could report the neighbour's
-/// density, which can differ from the sampled cell's by any factor.
-#[inline]
-pub(crate) fn place_in_cell(cell: usize, frac: f32, n: usize) -> f32 {
-    let x = ((cell as f32 + frac) / n as f32).min(ONE_MINUS_EPSILON);
-    nudge_into_cell(x, cell, n, 8)
-}
-
-/// [`place_in_cell`] with the offset in `f64`: `(cell + frac) / n` is computed in
-/// `f64` and rounded to `f32` once, then nudged the same way (up to 4 ulps). Used
-/// by the samplers whose in-cell offsets carry more than 24 bits.
-#[inline]
+/// The point `(cell + frac) / n` for an offset `frac ∈ [0, 1)`, computed in `f64`,
+/// rounded to `f32` once, then nudged by an ulp or two where that rounding put it on
+/// a neighbouring cell (`frac` just below 1 rounds up to the next cell's edge).
+/// Without this, `pdf(sample.x)` could report the neighbour's density, which can
+/// differ from the sampled cell's by any factor.
+#[inline(always)]
 pub(crate) fn place_in_cell_f64(cell: usize, frac: f64, n: usize) -> f32 {
-    let x = (((cell as f64) + frac) / n as f64) as f32;
-    nudge_into_cell(x.min(ONE_MINUS_EPSILON), cell, n, 4)
-}
-
-/// Steps `x` by single ulps, at most `tries` times, until [`cell_index`] puts it
-/// in `cell`.
-#[inline]
-fn nudge_into_cell(mut x: f32, cell: usize, n: usize, tries: usize) -> f32 {
-    for _ in 0..tries {
+    let mut x = (((len_f64(cell) + frac) / len_f64(n)) as f32).min(ONE_MINUS_EPSILON);
+    for _ in 0..4 {
         match cell_index(x, n).cmp(&cell) {
             std::cmp::Ordering::Greater => x = x.next_down(),
             std::cmp::Ordering::Less => x = x.next_up(),
@@ -109,34 +150,75 @@ fn nudge_into_cell(mut x: f32, cell: usize, n: usize, tries: usize) -> f32 {
     x
 }
 
-/// The largest `f32` below 1: continuous samples stay in `[0, 1)`.
-pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
-
-/// Fills `cdf` (length `f.len() + 1`) with the normalised CDF of `f`, whose values
-/// must already be sanitised, and returns the integral `Σ f / n` (0 when there is no
-/// positive mass: then `cdf` is uniform).
+/// Fills `cdf` (length `f.len() + 1`) with the fixed-point CDF of `f`, whose values
+/// must be finite and non-negative, and `guide` (length `1 << guide_bits(n)`) with
+/// its guide table. Returns `Σ f` (0 when there is no positive mass: then the CDF is
+/// uniform).
 ///
-/// Two passes over `f` (total, then running sums), both in f64, so no scratch
-/// buffer is needed; the row is small enough to stay in cache between them.
-fn build_cdf(f: &[f32], cdf: &mut [f32]) -> f64 {
+/// Prefix sums in f64 are rounded to the nearest integer, then every cell with
+/// `f > 0` is widened to at least 1: forward (a cell that rounded to nothing takes
+/// one unit above its left edge) and, should that run past `CDF_ONE` at the end,
+/// backward from `CDF_ONE`. Both passes only move edges by the few units that
+/// rounding lost, and the CDF stays non-decreasing.
+fn build_cdf<T: Copy + Into<f64>>(f: &[T], cdf: &mut [u32], guide: &mut [u32]) -> f64 {
     let n = f.len();
     debug_assert_eq!(cdf.len(), n + 1);
-    let total: f64 = f.iter().map(|&v| v as f64).sum();
+    let total: f64 = f.iter().map(|&v| v.into()).sum();
+    let one = CDF_ONE as u64;
+    cdf[0] = 0;
     if total > 0.0 && total.is_finite() {
-        let inv = 1.0 / total;
-        let mut running = 0.0f64;
-        cdf[0] = 0.0;
+        let scale = CDF_ONE as f64 / total;
+        let (mut running, mut prev, mut overran) = (0.0f64, 0u64, false);
         for (c, &v) in cdf[1..].iter_mut().zip(f) {
-            running += v as f64;
-            *c = (running * inv) as f32;
+            let v: f64 = v.into();
+            running += v;
+            // Never below the previous edge, which a widened cell may have raised.
+            let mut edge = ((running * scale).round() as u64).clamp(prev, one);
+            if v > 0.0 && edge == prev {
+                edge = prev + 1;
+                if edge > one {
+                    edge = one;
+                    overran = true;
+                }
+            }
+            *c = edge as u32;
+            prev = edge;
+        }
+        // The last cell needs room below CDF_ONE too.
+        overran |= f[n - 1].into() > 0.0 && cdf[n - 1] == CDF_ONE;
+        cdf[n] = CDF_ONE;
+        if overran {
+            for o in (1..n).rev() {
+                let limit = if f[o].into() > 0.0 {
+                    cdf[o + 1].saturating_sub(1)
+                } else {
+                    cdf[o + 1]
+                };
+                cdf[o] = cdf[o].min(limit);
+            }
         }
     } else {
         for (i, c) in cdf.iter_mut().enumerate() {
-            *c = (i as f64 / n as f64) as f32;
+            *c = (i as f64 / n as f64 * CDF_ONE as f64).round() as u32;
         }
     }
-    cdf[n] = 1.0;
-    total / n as f64
+    build_guide(cdf, guide);
+    total
+}
+
+/// `guide[k]` = the last cell `o` (of `n = cdf.len() - 1`) with
+/// `cdf[o] <= k · 2³² / guide.len()`, by one merge-like pass over both arrays.
+fn build_guide(cdf: &[u32], guide: &mut [u32]) {
+    let n = cdf.len() - 1;
+    let shift = 32 - guide.len().ilog2();
+    let mut o = 0usize;
+    for (k, g) in guide.iter_mut().enumerate() {
+        let start = ((k as u64) << shift).min(CDF_ONE as u64) as u32;
+        while o + 1 < n && cdf[o + 1] <= start {
+            o += 1;
+        }
+        *g = o as u32;
+    }
 }
 
 /// `1 / x` for a positive integral, 0 otherwise (a zero function has pdf 0).
@@ -160,9 +242,10 @@ pub(crate) fn sanitize(value: f32) -> f32 {
 
 /// A piecewise-constant distribution on `[0, 1]` with `n` equal cells.
 ///
-/// Guarantees: a cell with `f = 0` is never sampled; `pdf(sample_continuous(ξ).x)`
-/// equals the returned pdf; `invert(sample_continuous(ξ).x) ≈ ξ`. Sampling costs one
-/// binary search, `O(log n)`; memory is 8 bytes per cell.
+/// Guarantees: exactly the cells with `f > 0` are sampled; `pdf` is the exact density
+/// of `sample_continuous` and `pdf(sample_continuous(ξ).x)` equals the returned pdf;
+/// `invert(sample_continuous(ξ).x) ≈ ξ`. Sampling costs one guide-table lookup and a
+/// short forward scan (`O(1)` expected); memory is 4 to 6 bytes per cell.
 ///
 /// ```
 /// use envlight::distribution::Distribution1D;
@@ -172,11 +255,11 @@ pub(crate) fn sanitize(value: f32) -> f32 {
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct Distribution1D {
-    func: Vec<f32>,
-    cdf: Vec<f32>,
+    cdf: Vec<u32>,
+    guide: Vec<u32>,
     integral: f64,
-    /// `1 / integral`, or 0 for a zero function.
-    inv_integral: f64,
+    /// `n / CDF_ONE`, or 0 for a zero function: pdf = width · this.
+    pdf_scale: f64,
 }
 
 /// A continuous sample of a 1D distribution.
@@ -184,7 +267,7 @@ pub struct Distribution1D {
 pub struct Sample1D {
     /// The point in `[0, 1)`.
     pub x: f32,
-    /// Its density `f[cell] / integral` (0 when the function is zero).
+    /// Its density, `n` times the cell's probability (0 when the function is zero).
     pub pdf: f32,
     /// The cell that holds `x`.
     pub cell: usize,
@@ -195,7 +278,8 @@ pub struct Sample1D {
 pub struct DiscreteSample {
     /// The chosen cell.
     pub index: usize,
-    /// Its probability `f[index] / Σ f` (0 when the function is zero).
+    /// Its probability, `f[index] / Σ f` up to the CDF's 2⁻³² resolution (0 when the
+    /// function is zero).
     pub probability: f32,
     /// `ξ` rescaled to `[0, 1)` within the chosen cell, free for reuse.
     pub remapped: f32,
@@ -207,22 +291,44 @@ impl Distribution1D {
     /// # Panics
     /// When `f` is empty.
     pub fn new(f: &[f32]) -> Self {
+        let f: Vec<f32> = f.iter().map(|&v| sanitize(v)).collect();
+        Self::from_sanitized(&f)
+    }
+
+    /// Builds from values already known to be finite and non-negative.
+    fn from_sanitized<T: Copy + Into<f64>>(f: &[T]) -> Self {
         assert!(!f.is_empty(), "a distribution needs at least one cell");
-        let func: Vec<f32> = f.iter().map(|&v| sanitize(v)).collect();
-        let mut cdf = vec![0.0; f.len() + 1];
-        let integral = build_cdf(&func, &mut cdf);
+        let n = f.len();
+        let mut cdf = vec![0u32; n + 1];
+        let mut guide = vec![0u32; 1 << guide_bits(n)];
+        let total = build_cdf(f, &mut cdf, &mut guide);
+        let integral = total / n as f64;
+        let pdf_scale = if inverse_or_zero(integral) > 0.0 {
+            n as f64 / CDF_ONE as f64
+        } else {
+            0.0
+        };
         Self {
-            func,
             cdf,
+            guide,
             integral,
-            inv_integral: inverse_or_zero(integral),
+            pdf_scale,
+        }
+    }
+
+    #[inline]
+    fn view(&self) -> GuidedCdf<'_> {
+        GuidedCdf {
+            cdf: &self.cdf,
+            guide: &self.guide,
+            shift: 32 - guide_bits(self.len()),
         }
     }
 
     /// Number of cells.
     #[inline]
     pub fn len(&self) -> usize {
-        self.func.len()
+        self.cdf.len() - 1
     }
 
     /// Always false: a distribution has at least one cell.
@@ -237,88 +343,84 @@ impl Distribution1D {
         self.integral
     }
 
-    /// The (sanitised) function values.
+    /// The fixed-point CDF, `n + 1` entries from 0 to [`CDF_ONE`].
     #[inline]
-    pub fn func(&self) -> &[f32] {
-        &self.func
-    }
-
-    /// The normalised CDF, `n + 1` entries from 0 to 1.
-    #[inline]
-    pub fn cdf(&self) -> &[f32] {
+    pub fn cdf(&self) -> &[u32] {
         &self.cdf
     }
 
-    /// Density at `x ∈ [0, 1]`: `f[⌊x n⌋] / integral`, or 0 for a zero function.
+    /// Bytes of sampling data held (CDF and guide table).
+    pub fn memory_bytes(&self) -> usize {
+        4 * (self.cdf.len() + self.guide.len())
+    }
+
+    /// Density at `x ∈ [0, 1]`: `n · width[⌊x n⌋] / CDF_ONE`, or 0 for a zero
+    /// function.
     #[inline]
     pub fn pdf(&self, x: f32) -> f32 {
-        self.cell_pdf(cell_index(x, self.func.len()))
+        self.cell_pdf(cell_index(x, self.len()))
     }
 
     #[inline]
     fn cell_pdf(&self, cell: usize) -> f32 {
-        (self.func[cell] as f64 * self.inv_integral) as f32
+        (self.view().width(cell) as f64 * self.pdf_scale) as f32
     }
 
-    /// Maps `ξ ∈ [0, 1)` to `x` distributed with density `pdf`: finds the CDF segment
-    /// `o` holding `ξ`, then places `x` linearly inside it,
-    /// `x = (o + (ξ - cdf[o]) / (cdf[o+1] - cdf[o])) / n`.
+    /// Maps `ξ ∈ [0, 1)` to `x` distributed with density `pdf`: finds the cell `o`
+    /// whose CDF segment holds `ξ`, then places `x` linearly inside it.
     #[inline]
     pub fn sample_continuous(&self, xi: f32) -> Sample1D {
-        let (cell, du) = sample_segment(&self.cdf, xi);
+        let (cell, frac, width) = self.view().sample(xi);
         Sample1D {
-            x: place_in_cell(cell, du, self.func.len()),
-            pdf: self.cell_pdf(cell),
+            x: place_in_cell_f64(cell, frac, self.len()),
+            pdf: (width as f64 * self.pdf_scale) as f32,
             cell,
         }
     }
 
-    /// Picks cell `i` with probability `f[i] / Σ f`.
+    /// Picks cell `i` with probability `width[i] / CDF_ONE ≈ f[i] / Σ f`.
     #[inline]
     pub fn sample_discrete(&self, xi: f32) -> DiscreteSample {
-        let (index, remapped) = sample_segment(&self.cdf, xi);
-        let n = self.func.len() as f64;
-        let probability = (self.func[index] as f64 * self.inv_integral / n) as f32;
+        let (index, frac, _) = self.view().sample(xi);
         DiscreteSample {
             index,
-            probability,
-            remapped,
+            probability: self.discrete_probability(index),
+            remapped: (frac as f32).min(ONE_MINUS_EPSILON),
         }
     }
 
     /// Probability of picking cell `index` in [`Self::sample_discrete`].
     #[inline]
     pub fn discrete_probability(&self, index: usize) -> f32 {
-        self.cell_pdf(index) / self.func.len() as f32
+        (self.cell_pdf(index) as f64 / self.len() as f64) as f32
     }
 
     /// The sample-space point that [`Self::sample_continuous`] maps to `x`:
-    /// `ξ = cdf[o] + (x n - o)(cdf[o+1] - cdf[o])` with `o = ⌊x n⌋`.
+    /// `ξ = (c[o] + (x n - o) width[o]) / CDF_ONE` with `o = ⌊x n⌋`.
     #[inline]
     pub fn invert(&self, x: f32) -> f32 {
-        invert_segment(&self.cdf, x)
+        self.view().invert(x)
     }
 }
 
 /// A piecewise-constant distribution on `[0, 1]²` over an `nu × nv` grid, sampled
 /// as a marginal over rows (v) and a conditional within the chosen row (u):
-/// `p(u, v) = p(v) p(u | v) = f[v][u] / I`, `I = Σ f / (nu nv)`.
+/// `p(u, v) = p(v) p(u | v)`, which equals `f[v][u] / I` with `I = Σ f / (nu nv)` up
+/// to the CDFs' 2⁻³² resolution (see the module docs).
 ///
-/// Memory: 8 bytes per cell (the function and one CDF entry) plus 8 per row.
-/// Sampling: two binary searches, `O(log nu + log nv)`.
+/// Memory: 4 bytes of CDF and 1 to 2 bytes of guide table per cell, plus about 6
+/// per row. Sampling: two guide-table lookups with short scans, `O(1)` expected.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Distribution2D {
     nu: usize,
     nv: usize,
-    /// `f[v * nu + u]`, sanitised.
-    func: Vec<f32>,
-    /// Row `v`'s normalised conditional CDF at `[v * (nu + 1) .. (v + 1) * (nu + 1)]`.
-    conditional_cdf: Vec<f32>,
-    /// Each row's integral `Σ_u f[v][u] / nu`.
-    row_integral: Vec<f64>,
+    /// Row `v`'s conditional CDF at `[v * (nu + 1) .. (v + 1) * (nu + 1)]`.
+    conditional_cdf: Vec<u32>,
+    /// Row `v`'s guide table at `[v * guide_len .. (v + 1) * guide_len]`.
+    conditional_guide: Vec<u32>,
     marginal: Distribution1D,
-    /// `1 / I`, or 0 for a zero function (so pdfs come out 0, never NaN).
-    inv_integral: f64,
+    /// `nu nv / CDF_ONE²`, or 0 for a zero function: pdf = width_u · width_v · this.
+    pdf_scale: f64,
 }
 
 /// A continuous sample of a 2D distribution.
@@ -344,15 +446,14 @@ impl Distribution2D {
             "bad 2D grid shape"
         );
         Self::from_rows(nu, f.len() / nu, |v, row| {
-            for (dst, &src) in row.iter_mut().zip(&f[v * nu..(v + 1) * nu]) {
-                *dst = sanitize(src);
-            }
+            row.copy_from_slice(&f[v * nu..(v + 1) * nu]);
         })
     }
 
-    /// Builds the distribution from a function that fills row `v` (`nu` values) in
-    /// place; rows are filled and summed in parallel, in one pass over memory.
-    /// Values that are not finite and positive are stored as 0.
+    /// Builds the distribution from a function that fills row `v` (`nu` values) into
+    /// a scratch buffer; rows are filled and turned into CDFs in parallel, in one pass
+    /// over memory, and the function values themselves are never stored. Values that
+    /// are not finite and positive count as 0.
     ///
     /// # Panics
     /// When `nu == 0` or `nv == 0`.
@@ -375,52 +476,33 @@ impl Distribution2D {
         init: impl Fn() -> S + Sync,
         fill_row: impl Fn(&mut S, usize, &mut [f32]) -> T + Sync,
     ) -> (Self, Vec<T>) {
-        use rayon::prelude::*;
         assert!(nu > 0 && nv > 0, "bad 2D grid shape");
-        let mut func = vec![0.0f32; nu * nv];
-        let mut conditional_cdf = vec![0.0f32; (nu + 1) * nv];
-        let mut row_integral = vec![0.0f64; nv];
-        let mut results = vec![T::default(); nv];
-        // Enough blocks to balance the load, each big enough that per-block work
-        // (state set-up, scheduling) costs little next to its rows.
-        let blocks = (rayon::current_num_threads() * 8).max(1);
-        let rows_per_task = nv.div_ceil(blocks).max((4096 / nu).max(1));
-        func.par_chunks_mut(nu * rows_per_task)
-            .zip(conditional_cdf.par_chunks_mut((nu + 1) * rows_per_task))
-            .zip(row_integral.par_chunks_mut(rows_per_task))
-            .zip(results.par_chunks_mut(rows_per_task))
-            .enumerate()
-            .for_each(|(task, (((funcs, cdfs), integrals), outs))| {
-                let mut state = init();
-                for (k, (((row, cdf), integral), out)) in funcs
-                    .chunks_mut(nu)
-                    .zip(cdfs.chunks_mut(nu + 1))
-                    .zip(integrals.iter_mut())
-                    .zip(outs.iter_mut())
-                    .enumerate()
-                {
-                    *out = fill_row(&mut state, task * rows_per_task + k, row);
-                    for value in row.iter_mut() {
-                        *value = sanitize(*value);
-                    }
-                    *integral = build_cdf(row, cdf);
-                }
-            });
-        let marginal_func: Vec<f32> = row_integral.iter().map(|&i| i as f32).collect();
-        let mut marginal = Distribution1D::new(&marginal_func);
-        // The marginal's integral is the 2D integral; keep it in full precision
-        // (the f32 row integrals only shape the marginal CDF).
-        marginal.integral = row_integral.iter().sum::<f64>() / nv as f64;
-        marginal.inv_integral = inverse_or_zero(marginal.integral);
+        let mut conditional_cdf = vec![0u32; (nu + 1) * nv];
+        let guide_len = 1usize << guide_bits(nu);
+        let mut conditional_guide = vec![0u32; guide_len * nv];
+        let mut rows: Vec<(&mut [u32], &mut [u32])> = conditional_cdf
+            .chunks_mut(nu + 1)
+            .zip(conditional_guide.chunks_mut(guide_len))
+            .collect();
+        let (row_sums, results) = for_each_row(nu, init, fill_row, &mut rows, |row, out| {
+            build_cdf(row, out.0, out.1)
+        });
+        drop(rows);
+        let row_integrals: Vec<f64> = row_sums.iter().map(|&s| s / nu as f64).collect();
+        let marginal = Distribution1D::from_sanitized(&row_integrals);
+        let pdf_scale = if marginal.pdf_scale > 0.0 {
+            (nu as f64 / CDF_ONE as f64) * (nv as f64 / CDF_ONE as f64)
+        } else {
+            0.0
+        };
         (
             Self {
                 nu,
                 nv,
-                func,
                 conditional_cdf,
-                row_integral,
-                inv_integral: marginal.inv_integral,
+                conditional_guide,
                 marginal,
+                pdf_scale,
             },
             results,
         )
@@ -444,40 +526,47 @@ impl Distribution2D {
         self.marginal.integral
     }
 
-    /// The (sanitised) function, row-major.
-    #[inline]
-    pub fn func(&self) -> &[f32] {
-        &self.func
-    }
-
-    /// The marginal distribution over rows.
+    /// The marginal distribution over rows (built from the rows' integrals).
     #[inline]
     pub fn marginal(&self) -> &Distribution1D {
         &self.marginal
     }
 
-    /// Integral of row `v`, `Σ_u f[v][u] / nu`.
+    /// Row `v`'s conditional distribution's fixed-point CDF, `nu + 1` entries.
     #[inline]
-    pub fn row_integral(&self, v: usize) -> f64 {
-        self.row_integral[v]
-    }
-
-    /// Bytes of sampling data held (function, CDFs and row integrals).
-    pub fn memory_bytes(&self) -> usize {
-        4 * (self.func.len() + self.conditional_cdf.len() + self.marginal.func.len())
-            + 4 * self.marginal.cdf.len()
-            + 8 * self.row_integral.len()
-    }
-
-    #[inline]
-    fn row_cdf(&self, v: usize) -> &[f32] {
+    pub fn row_cdf(&self, v: usize) -> &[u32] {
         &self.conditional_cdf[v * (self.nu + 1)..(v + 1) * (self.nu + 1)]
     }
 
-    /// Density of cell `[iu, iv]`: `f[iv][iu] / I`, 0 for a zero function.
+    /// Bytes of sampling data held (CDFs and guide tables).
+    pub fn memory_bytes(&self) -> usize {
+        4 * (self.conditional_cdf.len() + self.conditional_guide.len())
+            + self.marginal.memory_bytes()
+    }
+
+    #[inline]
+    fn row(&self, v: usize) -> GuidedCdf<'_> {
+        let bits = guide_bits(self.nu);
+        let len = 1usize << bits;
+        GuidedCdf {
+            cdf: self.row_cdf(v),
+            guide: &self.conditional_guide[v * len..(v + 1) * len],
+            shift: 32 - bits,
+        }
+    }
+
+    /// Density of cell `[iu, iv]`: `nu nv · width_v(iv) · width_u(iu | iv) /
+    /// CDF_ONE²`, 0 for a zero function.
     #[inline]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
-        (self.func[iv * self.nu + iu] as f64 * self.inv_integral) as f32
+        let wv = self.marginal.view().width(iv);
+        let wu = self.row(iv).width(iu);
+        self.pdf_of_widths(wu, wv)
+    }
+
+    #[inline]
+    fn pdf_of_widths(&self, wu: u32, wv: u32) -> f32 {
+        (wu as f64 * wv as f64 * self.pdf_scale) as f32
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
@@ -490,14 +579,14 @@ impl Distribution2D {
     /// picks the row from the marginal, `ξ0` the position within that row.
     #[inline]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        let (iv, dv) = sample_segment(&self.marginal.cdf, xi[1]);
-        let (iu, du) = sample_segment(self.row_cdf(iv), xi[0]);
+        let (iv, dv, wv) = self.marginal.view().sample(xi[1]);
+        let (iu, du, wu) = self.row(iv).sample(xi[0]);
         Sample2D {
             uv: [
-                place_in_cell(iu, du, self.nu),
-                place_in_cell(iv, dv, self.nv),
+                place_in_cell_f64(iu, du, self.nu),
+                place_in_cell_f64(iv, dv, self.nv),
             ],
-            pdf: self.cell_pdf(iu, iv),
+            pdf: self.pdf_of_widths(wu, wv),
             cell: [iu, iv],
         }
     }
@@ -505,10 +594,55 @@ impl Distribution2D {
     /// The sample-space point that [`Self::sample_continuous`] maps to `uv`.
     #[inline]
     pub fn invert(&self, uv: [f32; 2]) -> [f32; 2] {
-        let xi1 = invert_segment(&self.marginal.cdf, uv[1]);
-        let xi0 = invert_segment(self.row_cdf(cell_index(uv[1], self.nv)), uv[0]);
+        let xi1 = self.marginal.view().invert(uv[1]);
+        let xi0 = self.row(cell_index(uv[1], self.nv)).invert(uv[0]);
         [xi0, xi1]
     }
+}
+
+/// Fills `nv` rows of `nu` values in parallel and hands each, sanitised, to
+/// `consume` with that row's item of `outputs` (one per row). Returns what `consume`
+/// gave for each row and `fill_row`'s results, in row order.
+///
+/// Rows go out in contiguous blocks, in increasing order within a block: enough
+/// blocks to balance the load, each big enough that per-block work (state set-up,
+/// scheduling) costs little next to its rows. A block fills one scratch row, which
+/// stays in cache while it is consumed.
+pub(crate) fn for_each_row<S, T, O>(
+    nu: usize,
+    init: impl Fn() -> S + Sync,
+    fill_row: impl Fn(&mut S, usize, &mut [f32]) -> T + Sync,
+    outputs: &mut [O],
+    consume: impl Fn(&[f32], &mut O) -> f64 + Sync,
+) -> (Vec<f64>, Vec<T>)
+where
+    T: Send + Default + Clone,
+    O: Send,
+{
+    use rayon::prelude::*;
+    let nv = outputs.len();
+    assert!(nu > 0 && nv > 0, "bad 2D grid shape");
+    let blocks = (rayon::current_num_threads() * 8).max(1);
+    let rows_per_task = nv.div_ceil(blocks).max((4096 / nu).max(1));
+    let mut consumed = vec![0.0f64; nv];
+    let mut results = vec![T::default(); nv];
+    outputs
+        .par_chunks_mut(rows_per_task)
+        .zip(consumed.par_chunks_mut(rows_per_task))
+        .zip(results.par_chunks_mut(rows_per_task))
+        .enumerate()
+        .for_each(|(task, ((outs, sums), res))| {
+            let mut state = init();
+            let mut scratch = vec![0.0f32; nu];
+            for (k, ((out, sum), result)) in outs.iter_mut().zip(sums).zip(res).enumerate() {
+                *result = fill_row(&mut state, task * rows_per_task + k, &mut scratch);
+                for value in scratch.iter_mut() {
+                    *value = sanitize(*value);
+                }
+                *sum = consume(&scratch, out);
+            }
+        });
+    (consumed, results)
 }
 
 #[cfg(test)]
@@ -526,14 +660,89 @@ mod tests {
         assert!((d.integral() - 3.2).abs() < 1e-12);
         let s = d.sample_continuous(0.0);
         assert!(close(s.x, 0.0) && close(s.pdf, 5.0 / 16.0), "{s:?}");
+        // The edge at cdf = 1/2 sits half a unit above ξ = 0.5 on the 2³² - 1 scale,
+        // so ξ = 0.5 ends cell 3; just above it starts cell 4.
         let s = d.sample_continuous(0.5);
-        assert!(close(s.x, 0.8) && close(s.pdf, 2.5), "{s:?}");
+        assert!(
+            close(s.x, 0.8) && close(s.pdf, 1.25) && s.cell == 3,
+            "{s:?}"
+        );
+        let s = d.sample_continuous(0.500001);
+        assert!(close(s.x, 0.8) && close(s.pdf, 2.5) && s.cell == 4, "{s:?}");
         let s = d.sample_continuous(0.75);
         assert!(close(s.x, 0.9) && close(s.pdf, 2.5), "{s:?}");
         let s = d.sample_continuous(ONE_MINUS_EPSILON);
         assert!(close(s.x, 1.0) && s.x < 1.0, "{s:?}");
         // ξ = 1 is outside the contract but must still land in range.
         assert!(d.sample_continuous(1.0).x < 1.0);
+    }
+
+    #[test]
+    fn guide_table_search_equals_a_plain_scan() {
+        // Rows with zero runs, a spike and smooth parts; ξ at and around every edge.
+        let mut rng = crate::rng::SplitMix64::new(11);
+        for n in [1usize, 2, 3, 5, 8, 31, 64, 100, 257] {
+            let f: Vec<f32> = (0..n)
+                .map(|i| match rng.next_u64() % 4 {
+                    0 => 0.0,
+                    1 => 1e6 * (i + 1) as f32,
+                    _ => rng.next_f32(),
+                })
+                .collect();
+            let d = Distribution1D::new(&f);
+            assert!(d.cdf().windows(2).all(|c| c[0] <= c[1]), "{:?}", d.cdf());
+            let view = d.view();
+            let mut probes: Vec<u32> = (0..2000).map(|_| rng.next_u64() as u32).collect();
+            for &c in d.cdf() {
+                probes.extend([c.saturating_sub(1), c, c.saturating_add(1)]);
+            }
+            for x in probes.into_iter().map(|x| x.min(CDF_ONE - 1)) {
+                let expected = (0..n).rev().find(|&o| d.cdf()[o] <= x).unwrap();
+                assert_eq!(view.find(x), expected, "n={n} x={x}");
+                assert!(view.width(expected) > 0);
+            }
+        }
+    }
+
+    #[test]
+    fn every_positive_cell_keeps_a_nonzero_width() {
+        // 1e-30 next to 1e30: far below 2⁻³² of the mass, still sampled, with a pdf
+        // that is the CDF's smallest step rather than 0. Also at the very end of the
+        // row, where the forward pass has no room and the backward pass makes it.
+        for f in [
+            vec![1e-30f32, 1e30, 1e-30, 0.0, 1e-30],
+            vec![1e30, 1e-30, 1e-30, 1e-30],
+            vec![0.0, 1e-30, 1e30],
+        ] {
+            let d = Distribution1D::new(&f);
+            for (i, &v) in f.iter().enumerate() {
+                let width = d.view().width(i);
+                assert_eq!(width > 0, v > 0.0, "{f:?} cell {i} width {width}");
+            }
+            let total: u64 = (0..f.len()).map(|i| d.view().width(i) as u64).sum();
+            assert_eq!(total, CDF_ONE as u64);
+        }
+        // A row with more positive cells than rounding can place.
+        let mut f = vec![1e-30f32; 1000];
+        f[500] = 1e30;
+        let d = Distribution1D::new(&f);
+        assert!((0..1000).all(|i| d.view().width(i) > 0));
+        assert!(d.pdf(0.5) > 999.0 * 0.99);
+    }
+
+    #[test]
+    fn pdf_integrates_to_one_exactly_in_cdf_units() {
+        let f: Vec<f32> = (0..37).map(|i| ((i * 7919) % 13) as f32).collect();
+        let d = Distribution2D::new(&f, 1);
+        let sum: f64 = (0..37).map(|v| d.cell_pdf(0, v) as f64).sum::<f64>() / 37.0;
+        assert!((sum - 1.0).abs() < 1e-6, "{sum}");
+        let d = Distribution2D::new(&f[..36], 6);
+        let sum: f64 = (0..6)
+            .flat_map(|v| (0..6).map(move |u| (u, v)))
+            .map(|(u, v)| d.cell_pdf(u, v) as f64)
+            .sum::<f64>()
+            / 36.0;
+        assert!((sum - 1.0).abs() < 1e-6, "{sum}");
     }
 
     #[test]
@@ -563,7 +772,11 @@ mod tests {
     fn zero_function_is_uniform_with_zero_pdf() {
         let d = Distribution1D::new(&[0.0, f32::NAN, -1.0, 0.0]);
         assert_eq!(d.integral(), 0.0);
-        assert_eq!(d.cdf(), &[0.0, 0.25, 0.5, 0.75, 1.0]);
+        let quarter = CDF_ONE / 4 + 1; // round(0.25 · (2³² - 1))
+        assert_eq!(
+            d.cdf(),
+            &[0, quarter, CDF_ONE / 2 + 1, 3 * quarter - 1, CDF_ONE]
+        );
         let s = d.sample_continuous(0.6);
         assert_eq!((s.pdf, s.cell), (0.0, 2));
         assert!(close(s.x, 0.6));
@@ -588,7 +801,7 @@ mod tests {
         let n = (1 << 24) + 1;
         let d = Distribution1D::new(&vec![1.0; n]);
         let cdf = d.cdf();
-        assert!(cdf[n - 1] < 1.0 && cdf[n] == 1.0);
+        assert!(cdf[n - 1] < CDF_ONE && cdf[n] == CDF_ONE);
         assert!(close(d.integral() as f32, 1.0));
     }
 
@@ -618,16 +831,15 @@ mod tests {
         let n = 7;
         let f = [1e-20, 1e-20, 1e-20, 5.0, 1e-30, 1e-20, 1e-20];
         let d = Distribution1D::new(&f);
+        let (lo, hi) = (d.cdf()[3] as f64, d.cdf()[4] as f64);
         for k in 0..=4096 {
-            let lo = d.cdf()[3];
-            let hi = d.cdf()[4];
-            let xi = (lo + (hi - lo) * k as f32 / 4096.0).min(hi.next_down());
-            let s = d.sample_continuous(xi);
+            let xi = ((lo + (hi - lo) * k as f64 / 4096.0) / CDF_ONE as f64) as f32;
+            let s = d.sample_continuous(xi.min(ONE_MINUS_EPSILON));
             assert_eq!(d.pdf(s.x), s.pdf, "ξ={xi} x={} cell {}", s.x, s.cell);
         }
         for cell in 0..n {
             for frac in [0.0, 1e-9, 0.5, ONE_MINUS_EPSILON, 1.0] {
-                let x = place_in_cell(cell, frac, n);
+                let x = place_in_cell_f64(cell, frac as f64, n);
                 assert_eq!(cell_index(x, n), cell, "cell {cell} frac {frac}");
             }
         }

@@ -4,7 +4,7 @@
 //! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
 
 use crate::error::{Error, Result, TexelPos};
-use crate::math::floor_fast;
+use crate::math::{floor_index, len_f32};
 
 /// How radiance between texel centres is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -227,36 +227,35 @@ impl EnvImage {
     }
 
     #[inline]
-    fn column(&self, s: f32, wrap: WrapU) -> usize {
-        match wrap {
-            WrapU::Periodic => wrap_index(s, self.width),
-            WrapU::Clamp => clamp_index(s, self.width),
-        }
-    }
-
-    #[inline]
     fn nearest(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
-        let x = self.column(floor_fast(u * self.width as f32), wrap);
-        let y = clamp_index(floor_fast(v * self.height as f32), self.height);
-        self.texel(x, y)
+        let (w, h) = (self.width, self.height);
+        let x = match wrap {
+            WrapU::Periodic => floor_index(periodic(u) * len_f32(w), w),
+            WrapU::Clamp => floor_index(u * len_f32(w), w),
+        };
+        self.texel(x, floor_index(v * len_f32(h), h))
     }
 
+    /// Texel centres sit at `(i + ½)/n`, so the lower neighbour of a coordinate is
+    /// `⌊u n - ½⌋`, which is -1 left of the first centre. Each axis is shifted so
+    /// that index is never negative before the floor (by a period for a periodic u,
+    /// by one texel for a clamped axis), then mapped back.
     #[inline]
     fn bilinear(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
-        let s = u * self.width as f32 - 0.5;
-        let t = v * self.height as f32 - 0.5;
-        let (s0, t0) = (floor_fast(s), floor_fast(t));
-        let (fs, ft) = (s - s0, t - t0);
-        let x0 = self.column(s0, wrap);
-        let x1 = match wrap {
-            WrapU::Periodic if x0 + 1 == self.width => 0,
-            WrapU::Periodic => x0 + 1,
-            WrapU::Clamp => self.column(s0 + 1.0, wrap),
+        let (w, h) = (self.width, self.height);
+        let (x0, x1, fs) = match wrap {
+            WrapU::Periodic => {
+                let s = periodic(u) * len_f32(w) - 0.5 + len_f32(w);
+                let i = floor_index(s, 2 * w);
+                let x0 = if i >= w { i - w } else { i };
+                let x1 = if x0 + 1 == w { 0 } else { x0 + 1 };
+                (x0, x1, s - len_f32(i))
+            }
+            WrapU::Clamp => clamped_pair(u, w),
         };
-        let y0 = clamp_index(t0, self.height);
-        let y1 = clamp_index(t0 + 1.0, self.height);
-        let (a, b) = (self.texel(x0, y0), self.texel(x1, y0));
-        let (c, d) = (self.texel(x0, y1), self.texel(x1, y1));
+        let (y0, y1, ft) = clamped_pair(v, h);
+        let (row0, row1) = (self.row(y0), self.row(y1));
+        let (a, b, c, d) = (row0[x0], row0[x1], row1[x0], row1[x1]);
         let mut out = [0.0f32; 3];
         for k in 0..3 {
             let top = a[k] + fs * (b[k] - a[k]);
@@ -267,17 +266,30 @@ impl EnvImage {
     }
 }
 
-/// `floor(s)` wrapped into `[0, n)`; also safe for huge or NaN `s` (gives 0).
+/// `u` reduced into `[0, 1)` (for u outside it: the lookups' u is periodic).
 #[inline]
-fn wrap_index(s: f32, n: usize) -> usize {
-    let i = s as i64; // saturating; NaN → 0
-    i.rem_euclid(n as i64) as usize
+fn periodic(u: f32) -> f32 {
+    if (0.0..1.0).contains(&u) {
+        u
+    } else {
+        let r = u - u.floor();
+        // u - ⌊u⌋ rounds up to 1 for tiny negative u.
+        if r < 1.0 {
+            r
+        } else {
+            0.0
+        }
+    }
 }
 
-/// `floor(t)` clamped into `[0, n-1]`; NaN gives 0.
+/// The two texels around coordinate `t ∈ [0, 1]` on a clamped axis of `n` texels,
+/// and the interpolation weight of the second: `⌊t n - ½⌋` and the next, clamped
+/// into `[0, n - 1]` (constant half-texels at the ends).
 #[inline]
-fn clamp_index(t: f32, n: usize) -> usize {
-    (t.max(0.0) as usize).min(n - 1)
+fn clamped_pair(t: f32, n: usize) -> (usize, usize, f32) {
+    let s = t * len_f32(n) + 0.5;
+    let i = floor_index(s, n + 1);
+    (i.saturating_sub(1), i.min(n - 1), s - len_f32(i))
 }
 
 #[cfg(test)]

@@ -22,12 +22,12 @@
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
-use crate::distribution::{Distribution2D, Sample2D};
+use crate::distribution::{for_each_row, Distribution2D, Sample2D};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
 use crate::image::{EnvImage, Lookup, WrapU};
-use crate::mapping::{direction_to_equirect, equirect_to_direction, EQUIRECT_JACOBIAN};
+use crate::mapping::{direction_to_equirect_and_sin, equirect_to_direction, EQUIRECT_JACOBIAN};
 use crate::math::{Rotation, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -135,8 +135,8 @@ impl Mapping {
     fn to_uv(self, d: Vec3) -> ([f32; 2], f32) {
         match self {
             Mapping::Equirectangular => {
-                let uv = direction_to_equirect(d);
-                (uv, EQUIRECT_JACOBIAN * (std::f32::consts::PI * uv[1]).sin())
+                let (uv, sin_theta) = direction_to_equirect_and_sin(d);
+                (uv, EQUIRECT_JACOBIAN * sin_theta)
             }
             Mapping::EqualArea => (equal_area::sphere_to_square(d), EQUAL_AREA_JACOBIAN),
         }
@@ -658,29 +658,47 @@ fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Syn
 fn build_sampler(image: &EnvImage, options: &LightOptions) -> (Planar, [f64; 3], bool) {
     let (w, h) = (image.width(), image.height());
     let mapping = options.mapping;
-    // The default path builds the inversion sampler in the same pass as the
-    // importance; every other path starts from the importance values.
-    let (importance, integral) = build_importance(image, options.lookup, mapping);
-    let mut compensated = false;
-    let planar = match options.density {
+    let init = || LuminanceRows::new(w);
+    let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
+        importance_row(image, options.lookup, mapping, cache, j, out)
+    };
+    let integral = |row_sums: &[[f64; 3]]| integral_rgb(row_sums, w, options.lookup, mapping);
+    match options.density {
+        Density::PiecewiseConstant
+            if options.sampler == Sampler::Inversion && !options.mis_compensation =>
+        {
+            // The default path: importance rows go straight into CDFs, never stored.
+            let (distribution, row_sums) = Distribution2D::from_rows_with(w, h, init, fill);
+            (Planar::Inversion(distribution), integral(&row_sums), false)
+        }
         Density::PiecewiseConstant => {
+            let mut values = vec![0.0f32; w * h];
+            let mut rows: Vec<&mut [f32]> = values.chunks_mut(w).collect();
+            let (_, row_sums) = for_each_row(w, init, fill, &mut rows, |row, out| {
+                out.copy_from_slice(row);
+                0.0
+            });
             let subtracted = options
                 .mis_compensation
-                .then(|| compensate(importance.func(), w, h, mapping))
+                .then(|| compensate(&values, w, h, mapping))
                 .flatten();
-            compensated = subtracted.is_some();
-            let f = subtracted.as_deref().unwrap_or(importance.func());
-            match options.sampler {
-                Sampler::Inversion if !compensated => Planar::Inversion(importance),
+            let compensated = subtracted.is_some();
+            let f = subtracted.as_deref().unwrap_or(&values);
+            let planar = match options.sampler {
                 Sampler::Inversion => Planar::Inversion(Distribution2D::new(f, w)),
                 Sampler::Alias => Planar::Alias(AliasTable2D::new(f, w)),
                 Sampler::Hierarchical => Planar::Hierarchical(Hierarchical2D::new(f, w)),
-            }
+            };
+            (planar, integral(&row_sums), compensated)
         }
         Density::PiecewiseBilinear => {
-            drop(importance);
+            let row_sums: Vec<[f64; 3]> = (0..h)
+                .into_par_iter()
+                .map(|j| rgb_sum(image.row(j)))
+                .collect();
             let (mut values, u_nodes, v_nodes) = bilinear_nodes(image, mapping);
             let (mu, mv) = (u_nodes.len(), v_nodes.len());
+            let mut compensated = false;
             if options.mis_compensation {
                 // Nodes carry Y·J at their own v; subtract Ȳ·J node by node.
                 let factors: Vec<f64> = v_nodes.iter().map(|&v| mapping.area_factor(v)).collect();
@@ -689,10 +707,13 @@ fn build_sampler(image: &EnvImage, options: &LightOptions) -> (Planar, [f64; 3],
                     compensated = true;
                 }
             }
-            Planar::Bilinear(BilinearDistribution2D::new(&values, &u_nodes, &v_nodes))
+            (
+                Planar::Bilinear(BilinearDistribution2D::new(&values, &u_nodes, &v_nodes)),
+                integral(&row_sums),
+                compensated,
+            )
         }
-    };
-    (planar, integral, compensated)
+    }
 }
 
 /// MIS compensation of a texel-grid importance `f = Y · J_j`: `max(0, f − Ȳ J_j)`
@@ -772,63 +793,63 @@ fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Ve
     (values, u_nodes, v_nodes)
 }
 
-/// The texel-grid importance of DESIGN.md §4 step 1 with its inversion sampler,
-/// and `∫ L dω`, in one row-parallel pass over the texels.
+/// Row `j` of the texel-grid importance of DESIGN.md §4 step 1, written to `out`;
+/// returns the row's RGB sums (for `∫ L dω`).
 ///
 /// Importance: `f[j][i] = Y(filtered) · J_j`; for bilinear lookups the filter is
 /// the `[1 6 1]/8` blur in v (clamped) then u (wrapped or clamped with the
 /// mapping), whose three input rows come from a rolling cache so each row's
-/// luminance is computed once per block.
-///
-/// Integral: along u, linear interpolation between texel centres (wrapped, or
-/// clamped with constant half-texels at the ends) integrates to the row mean, so
-/// `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle of row j's
-/// reconstruction weight ([`row_solid_angles`]); exact for either lookup.
-fn build_importance(
+/// luminance is computed once per block of rows.
+fn importance_row(
     image: &EnvImage,
     lookup: Lookup,
     mapping: Mapping,
-) -> (Distribution2D, [f64; 3]) {
+    cache: &mut LuminanceRows,
+    j: usize,
+    out: &mut [f32],
+) -> [f64; 3] {
     let (w, h) = (image.width(), image.height());
-    let wrap = mapping.wrap();
-    let (distribution, row_sums) = Distribution2D::from_rows_with(
-        w,
-        h,
-        || LuminanceRows::new(w),
-        |cache, j, out| {
-            let factor = mapping.area_factor((j as f64 + 0.5) / h as f64) as f32;
-            match lookup {
-                Lookup::Nearest => {
-                    let (luma, _) = cache.row(image, j);
-                    for (o, &y) in out.iter_mut().zip(luma) {
-                        *o = y * factor;
-                    }
-                }
-                Lookup::Bilinear => {
-                    // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal.
-                    out.copy_from_slice(cache.row(image, j.saturating_sub(1)).0);
-                    for (o, &y) in out.iter_mut().zip(cache.row(image, (j + 1).min(h - 1)).0) {
-                        *o += y;
-                    }
-                    for (o, &y) in out.iter_mut().zip(cache.row(image, j).0) {
-                        *o = (*o + 6.0 * y) * 0.125;
-                    }
-                    let (first, last) = (out[0], out[w - 1]);
-                    let (mut prev, beyond_last) = match wrap {
-                        WrapU::Periodic => (last, first),
-                        WrapU::Clamp => (first, last),
-                    };
-                    for i in 0..w {
-                        let next = if i + 1 < w { out[i + 1] } else { beyond_last };
-                        let centre = out[i];
-                        out[i] = (prev + 6.0 * centre + next) * 0.125 * factor;
-                        prev = centre;
-                    }
-                }
+    let factor = mapping.area_factor((j as f64 + 0.5) / h as f64) as f32;
+    match lookup {
+        Lookup::Nearest => {
+            let (luma, _) = cache.row(image, j);
+            for (o, &y) in out.iter_mut().zip(luma) {
+                *o = y * factor;
             }
-            cache.row(image, j).1
-        },
-    );
+        }
+        Lookup::Bilinear => {
+            // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal.
+            out.copy_from_slice(cache.row(image, j.saturating_sub(1)).0);
+            for (o, &y) in out.iter_mut().zip(cache.row(image, (j + 1).min(h - 1)).0) {
+                *o += y;
+            }
+            for (o, &y) in out.iter_mut().zip(cache.row(image, j).0) {
+                *o = (*o + 6.0 * y) * 0.125;
+            }
+            let (first, last) = (out[0], out[w - 1]);
+            let (mut prev, beyond_last) = match mapping.wrap() {
+                WrapU::Periodic => (last, first),
+                WrapU::Clamp => (first, last),
+            };
+            for i in 0..w {
+                let next = if i + 1 < w { out[i + 1] } else { beyond_last };
+                let centre = out[i];
+                out[i] = (prev + 6.0 * centre + next) * 0.125 * factor;
+                prev = centre;
+            }
+        }
+    }
+    cache.row(image, j).1
+}
+
+/// `∫ L dω` from each row's RGB sums.
+///
+/// Along u, linear interpolation between texel centres (wrapped, or clamped with
+/// constant half-texels at the ends) integrates to the row mean, so
+/// `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle of row j's
+/// reconstruction weight ([`row_solid_angles`]); exact for either lookup.
+fn integral_rgb(row_sums: &[[f64; 3]], w: usize, lookup: Lookup, mapping: Mapping) -> [f64; 3] {
+    let h = row_sums.len();
     let weights = match mapping {
         Mapping::Equirectangular => row_solid_angles(h, lookup),
         // Constant Jacobian: every row covers the same solid angle, 4π/h, and the
@@ -841,7 +862,20 @@ fn build_importance(
             integral[k] += sums[k] / w as f64 * weight;
         }
     }
-    (distribution, integral)
+    integral
+}
+
+/// Per-channel sums of a row of texels, in f64 (four partial sums per channel break
+/// the add dependency chain).
+fn rgb_sum(row: &[[f32; 3]]) -> [f64; 3] {
+    let mut partial = [[0.0f64; 3]; 4];
+    for (k, rgb) in row.iter().enumerate() {
+        let p = &mut partial[k & 3];
+        p[0] += rgb[0] as f64;
+        p[1] += rgb[1] as f64;
+        p[2] += rgb[2] as f64;
+    }
+    std::array::from_fn(|c| (partial[0][c] + partial[1][c]) + (partial[2][c] + partial[3][c]))
 }
 
 /// The luminance of the last three image rows a build task asked for, with each
@@ -869,18 +903,11 @@ impl LuminanceRows {
                     .unwrap_or(0);
                 let (id, luma, sums) = &mut self.slots[slot];
                 *id = j;
-                // Four partial sums per channel break the f64 add dependency chain.
-                let mut partial = [[0.0f64; 3]; 4];
-                for (k, (y, rgb)) in luma.iter_mut().zip(image.row(j)).enumerate() {
+                let row = image.row(j);
+                for (y, rgb) in luma.iter_mut().zip(row) {
                     *y = luminance(*rgb);
-                    let p = &mut partial[k & 3];
-                    p[0] += rgb[0] as f64;
-                    p[1] += rgb[1] as f64;
-                    p[2] += rgb[2] as f64;
                 }
-                *sums = std::array::from_fn(|c| {
-                    (partial[0][c] + partial[1][c]) + (partial[2][c] + partial[3][c])
-                });
+                *sums = rgb_sum(row);
                 slot
             }
         };

@@ -9,7 +9,7 @@
 //! So the top row looks at +z, `u = 0` at +x and `u = 0.25` at +y.
 
 use crate::distribution::ONE_MINUS_EPSILON;
-use crate::math::{atan2_fast, Vec3};
+use crate::math::{atan2_fast, sin_cos_pi, Vec3};
 use std::f32::consts::PI;
 
 /// `dω / (du dv) = 2π² sin θ`: this constant times `sin θ`.
@@ -18,8 +18,8 @@ pub const EQUIRECT_JACOBIAN: f32 = 2.0 * PI * PI;
 /// The unit direction at image point `(u, v)`, and `sin θ` at it.
 #[inline]
 pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
-    let (sin_theta, cos_theta) = (PI * v).sin_cos();
-    let (sin_phi, cos_phi) = (2.0 * PI * u).sin_cos();
+    let (sin_theta, cos_theta) = sin_cos_pi(v);
+    let (sin_phi, cos_phi) = sin_cos_pi(2.0 * u);
     let sin_theta = sin_theta.max(0.0);
     (
         Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta),
@@ -35,13 +35,24 @@ pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
 /// to about 3·10⁻⁴ rad (a twentieth of a texel on a 512-row map).
 #[inline]
 pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
-    let theta = atan2_fast((d.x * d.x + d.y * d.y).sqrt(), d.z);
+    direction_to_equirect_and_sin(d).0
+}
+
+/// [`direction_to_equirect`] and `sin θ` at `d` (any non-zero length), read off the
+/// direction as `√(x² + y²) / |d|` rather than recomputed from `v`: no
+/// trigonometry, and full relative precision next to the poles.
+#[inline]
+pub fn direction_to_equirect_and_sin(d: Vec3) -> ([f32; 2], f32) {
+    let r2 = d.x * d.x + d.y * d.y;
+    let r = r2.sqrt();
+    let theta = atan2_fast(r, d.z);
     let mut phi = atan2_fast(d.y, d.x);
     if phi < 0.0 {
         phi += 2.0 * PI;
     }
     let u = (phi * (0.5 / PI)).min(ONE_MINUS_EPSILON);
-    [u, theta * (1.0 / PI)]
+    let sin_theta = r / (r2 + d.z * d.z).sqrt();
+    ([u, theta * (1.0 / PI)], sin_theta)
 }
 
 #[cfg(test)]

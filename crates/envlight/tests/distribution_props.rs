@@ -7,7 +7,7 @@
 //! shrunk and saved in `distribution_props.proptest-regressions`, which is replayed
 //! first.
 
-use envlight::distribution::{Distribution1D, Distribution2D, ONE_MINUS_EPSILON};
+use envlight::distribution::{Distribution1D, Distribution2D, CDF_ONE, ONE_MINUS_EPSILON};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
@@ -87,6 +87,31 @@ fn total(f: &[f32]) -> f64 {
     f.iter().map(|&v| v as f64).sum()
 }
 
+/// How far, in CDF units (2⁻³² of the mass), a cell's stored width may be from its
+/// exact share `f / Σ f`: one unit of rounding, plus the units that cells whose
+/// share is below one unit borrow to keep a width of at least 1 (each such cell
+/// shifts later edges by at most one unit, forward or backward).
+fn width_slack(f: &[f32]) -> f64 {
+    let mass = total(f);
+    let tiny = f
+        .iter()
+        .filter(|&&v| v > 0.0 && (v as f64 / mass) * (CDF_ONE as f64) < 1.0)
+        .count();
+    2.0 + 2.0 * tiny as f64
+}
+
+/// A cell's share of the mass as stored: its CDF width over `CDF_ONE`.
+fn stored_share(cdf: &[u32], i: usize) -> f64 {
+    (cdf[i + 1] - cdf[i]) as f64 / CDF_ONE as f64
+}
+
+/// `|stored − exact| ≤ slack units` (with f32's 1e-6 and subnormal spacing), for a
+/// density of `n` cells times a share.
+fn share_close(stored: f32, exact_share: f64, n: f64, slack: f64) -> bool {
+    let exact = exact_share * n;
+    (stored as f64 - exact).abs() <= n * slack / CDF_ONE as f64 + 1e-6 * exact + 1.5e-45
+}
+
 /// The cell of `x ∈ [0, 1)` among `n`.
 fn cell_of(x: f32, n: usize) -> usize {
     ((x * n as f32) as usize).min(n - 1)
@@ -101,19 +126,23 @@ proptest! {
         let n = f.len();
         let cdf = d.cdf();
         prop_assert_eq!(cdf.len(), n + 1);
-        prop_assert_eq!(cdf[0], 0.0);
-        prop_assert_eq!(cdf[n], 1.0);
+        prop_assert_eq!(cdf[0], 0);
+        prop_assert_eq!(cdf[n], CDF_ONE);
         for w in cdf.windows(2) {
-            prop_assert!(w[0].is_finite() && w[0] <= w[1], "not monotone: {:?}", w);
+            prop_assert!(w[0] <= w[1], "not monotone: {:?}", w);
         }
         // integral = Σ f / n, summed in f64.
         let expected = total(&f) / n as f64;
         prop_assert!((d.integral() - expected).abs() <= 1e-12 * expected, "{} vs {expected}", d.integral());
         if expected > 0.0 {
-            // Each cell's CDF step is its share of the mass (to f32 rounding).
+            // Each cell's CDF step is its share of the mass, to the CDF's resolution,
+            // and is positive exactly where f is.
+            let slack = width_slack(&f);
             for (i, w) in cdf.windows(2).enumerate() {
                 let share = f[i] as f64 / total(&f);
-                prop_assert!(((w[1] - w[0]) as f64 - share).abs() <= 2e-7, "cell {i}: {} vs {share}", w[1] - w[0]);
+                let stored = (w[1] - w[0]) as f64;
+                prop_assert!((stored - share * CDF_ONE as f64).abs() <= slack, "cell {i}: {stored} vs {share}");
+                prop_assert_eq!(stored > 0.0, f[i] > 0.0, "cell {}: width {} for f = {}", i, stored, f[i]);
             }
         }
     }
@@ -131,10 +160,13 @@ proptest! {
             // pdf(sample.x) is the sample's pdf, exactly.
             prop_assert_eq!(d.pdf(s.x), s.pdf, "ξ={}: {:?}", xi, s);
             if lit {
-                // Never in a zero cell; pdf = f / integral (0 only if that underflows f32).
+                // Never in a zero cell; pdf = n · width / CDF_ONE exactly, which is
+                // f / integral to the CDF's resolution.
                 prop_assert!(f[s.cell] > 0.0, "ξ={xi} landed in zero cell {}: {s:?}", s.cell);
-                let expected = f[s.cell] as f64 / d.integral();
-                prop_assert!(close(s.pdf, expected), "{s:?} vs {expected}");
+                let stored = stored_share(d.cdf(), s.cell) * n as f64;
+                prop_assert!(close(s.pdf, stored), "{s:?} vs {stored}");
+                let share = f[s.cell] as f64 / total(&f);
+                prop_assert!(share_close(s.pdf, share, n as f64, width_slack(&f)), "{s:?} vs share {share}");
                 let back = d.invert(s.x);
                 prop_assert!((back - xi).abs() <= invert_tolerance(s.pdf), "ξ={xi} → x={} → {back} (pdf {})", s.x, s.pdf);
             } else {
@@ -161,7 +193,7 @@ proptest! {
             if mass > 0.0 {
                 prop_assert!(f[s.index] > 0.0);
                 let expected = f[s.index] as f64 / mass;
-                prop_assert!(close(s.probability, expected), "{s:?} vs {expected}");
+                prop_assert!(share_close(s.probability, expected, 1.0, width_slack(&f)), "{s:?} vs {expected}");
             } else {
                 prop_assert_eq!(s.probability, 0.0);
             }
@@ -209,7 +241,8 @@ proptest! {
         prop_assert!((d.integral() - expected).abs() <= 1e-9 * expected, "{} vs {expected}", d.integral());
         let pdf_sum: f64 = (0..nv).flat_map(|v| (0..nu).map(move |u| (u, v))).map(|(u, v)| d.cell_pdf(u, v) as f64).sum();
         if mass > 0.0 {
-            prop_assert!((pdf_sum / (nu * nv) as f64 - 1.0).abs() <= 1e-5, "mean cell pdf {}", pdf_sum / (nu * nv) as f64);
+            // The widths telescope: only f32 rounding of each cell's pdf remains.
+            prop_assert!((pdf_sum / (nu * nv) as f64 - 1.0).abs() <= 1e-6, "mean cell pdf {}", pdf_sum / (nu * nv) as f64);
         } else {
             prop_assert_eq!(pdf_sum, 0.0);
         }
@@ -222,14 +255,23 @@ proptest! {
                 let [iu, iv] = s.cell;
                 prop_assert!(f[iv * nu + iu] > 0.0, "landed in a zero cell: {s:?}");
                 prop_assert_eq!(s.pdf, d.cell_pdf(iu, iv));
-                // f / I, or 0 when that underflows f32: the grid spans up to 1e60, so
-                // a row can be chosen whose cell's density is below 1e-45.
-                let expected = f[iv * nu + iu] as f64 / d.integral();
-                prop_assert!(close(s.pdf, expected), "{s:?} vs {expected}");
+                // The row's share of the mass times the cell's share of the row, each
+                // to its CDF's resolution (the product may underflow f32: the grid
+                // spans up to 1e60, so a row can be chosen whose cell's density is
+                // below 1e-45).
+                let row = &f[iv * nu..(iv + 1) * nu];
+                let row_sums: Vec<f32> = f.chunks(nu).map(|r| total(r) as f32).collect();
+                let (share_v, share_u) = (total(row) / mass, f[iv * nu + iu] as f64 / total(row));
+                let (slack_v, slack_u) = (width_slack(&row_sums), width_slack(row));
+                let exact = share_v * share_u * (nu * nv) as f64;
+                let one = CDF_ONE as f64;
+                let err = (nu * nv) as f64
+                    * ((slack_u * share_v + slack_v * share_u) / one + slack_u * slack_v / (one * one));
+                prop_assert!((s.pdf as f64 - exact).abs() <= err + 1e-6 * exact + 1.5e-45, "{s:?} vs {exact} ± {err}");
                 let back = d.invert(s.uv);
                 // Marginal density of the row, conditional density within it.
                 let p_v = d.marginal().pdf(s.uv[1]);
-                let p_u = (f[iv * nu + iu] as f64 / d.row_integral(iv)) as f32;
+                let p_u = (stored_share(d.row_cdf(iv), iu) * nu as f64) as f32;
                 prop_assert!((back[1] - x1).abs() <= invert_tolerance(p_v), "ξ1 {x1} → {} ({s:?})", back[1]);
                 prop_assert!((back[0] - x0).abs() <= invert_tolerance(p_u), "ξ0 {x0} → {} ({s:?})", back[0]);
             } else {

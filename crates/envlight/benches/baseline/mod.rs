@@ -105,6 +105,7 @@ impl Baseline2D {
 pub struct BaselineLight {
     image: EnvImage,
     dist: Baseline2D,
+    importance: Vec<f32>,
 }
 
 impl BaselineLight {
@@ -120,7 +121,21 @@ impl BaselineLight {
             }
         }
         let dist = Baseline2D::new(&img, w, h);
-        Self { image, dist }
+        Self {
+            image,
+            dist,
+            importance: img,
+        }
+    }
+
+    /// The planar distribution alone (no direction, no radiance).
+    pub fn distribution(&self) -> &Baseline2D {
+        &self.dist
+    }
+
+    /// The importance the distribution was built from, row-major.
+    pub fn importance(&self) -> &[f32] {
+        &self.importance
     }
 
     pub fn sample(&self, xi: [f32; 2]) -> Option<(Vec3, f32, [f32; 3])> {
