@@ -387,12 +387,21 @@ impl LightArgs {
             sanitized,
         } = input;
         let (input_width, input_height) = (image.width(), image.height());
-        let spinner = Progress::spinner(&format!("building light from {name}"));
+        let options = self.light_options();
+        // The build reports rows of the light's image: the resampled square for an
+        // equal-area light from a lat-long map.
+        let rows = match (options.input_mapping, options.mapping) {
+            (Mapping::Equirectangular, Mapping::EqualArea) => options
+                .equal_area_size
+                .unwrap_or_else(|| envlight::equal_area::default_size(input_width, input_height)),
+            _ => input_height,
+        };
+        let bar = Progress::bar(rows as u64, "building");
         let started = Instant::now();
-        let light = EnvironmentLight::new(image, self.light_options())
+        let light = EnvironmentLight::with_progress(image, options, &|k| bar.inc(k as u64))
             .with_context(|| format!("{name}: cannot build the light"))?;
         let build_ms = started.elapsed().as_secs_f64() * 1e3;
-        spinner.finish();
+        bar.finish();
 
         let black = light.is_black();
         if black {

@@ -314,6 +314,22 @@ impl EnvironmentLight {
     /// bilinear density is asked of a sampler other than inversion, an equal-area
     /// input is not square, or an equal-area input is asked for a lat-long light.
     pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
+        Self::with_progress(image, options, &|_| {})
+    }
+
+    /// [`Self::new`], reporting progress for a front end's progress bar: the build
+    /// calls `rows_done(k)` each time it has finished `k` more rows of the light's
+    /// image ([`Self::image`], so for an equal-area light from a lat-long map, rows
+    /// of the resampled square). Calls come from the worker threads, in no
+    /// particular order; their counts add up to the image's height.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn with_progress(
+        image: EnvImage,
+        options: LightOptions,
+        rows_done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Self> {
         if !(options.scale >= 0.0 && options.scale.is_finite()) {
             return Err(Error::InvalidOption(format!(
                 "radiance scale must be finite and >= 0, got {}",
@@ -355,7 +371,7 @@ impl EnvironmentLight {
                 ))
             }
         };
-        let (planar, integral_rgb, compensated) = build_sampler(&image, &options);
+        let (planar, integral_rgb, compensated) = build_sampler(&image, &options, rows_done);
         Ok(Self {
             world_to_light: options.rotation.inverse(),
             rotated: !options.rotation.is_identity(),
@@ -581,10 +597,16 @@ impl EnvironmentLight {
 
     /// `(∫ Y dω, ∫ Y²/p dω)` by quadrature over the image (unscaled; efficiency is
     /// scale-free). Summed in row order, so independent of the thread count.
+    ///
+    /// Nodes: Gauss-Legendre, 2 points per quarter texel along each axis (each
+    /// quarter lies inside one patch of the bilinear reconstruction), so 16 per
+    /// texel. The luminance at the nodes is the lookup's reconstruction, computed
+    /// row by row: for each node height, the two image rows' luminance is blended
+    /// once, then read at the u nodes (luminance is linear in RGB). The pdf is read
+    /// at every node for the bilinear density, and once per texel for the others,
+    /// which are constant over each texel.
     fn luminance_moments(&self) -> (f64, f64) {
         let (w, h) = (self.image.width(), self.image.height());
-        // Gauss-Legendre 2-point nodes on [0, 1], inside each quarter texel (each
-        // quarter lies inside one patch of the bilinear reconstruction).
         let g = 0.5 / 3f64.sqrt();
         let nodes = [
             0.25 - 0.5 * g,
@@ -592,31 +614,87 @@ impl EnvironmentLight {
             0.75 - 0.5 * g,
             0.75 + 0.5 * g,
         ];
-        let (mapping, lookup, wrap) = (
-            self.options.mapping,
-            self.options.lookup,
-            self.options.mapping.wrap(),
-        );
+        let (mapping, lookup) = (self.options.mapping, self.options.lookup);
+        let periodic = mapping.wrap() == WrapU::Periodic;
         let jacobian_scale = match mapping {
             Mapping::Equirectangular => EQUIRECT_JACOBIAN as f64,
             Mapping::EqualArea => EQUAL_AREA_JACOBIAN as f64,
         };
+        let constant_per_texel = !matches!(self.planar, Planar::Bilinear(_));
+        let luminance_row =
+            |j: usize| -> Vec<f32> { self.image.row(j).iter().map(|&t| luminance(t)).collect() };
         (0..h)
             .into_par_iter()
             .map(|j| {
-                let mut ey = 0.0f64;
-                let mut ey2p = 0.0f64;
+                let (mut ey, mut ey2p) = (0.0f64, 0.0f64);
+                let centre_v = ((j as f64 + 0.5) / h as f64) as f32;
+                let texel_pdf: Vec<f64> = if constant_per_texel {
+                    (0..w)
+                        .map(|i| {
+                            let u = ((i as f64 + 0.5) / w as f64) as f32;
+                            self.planar.pdf([u, centre_v]) as f64
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                let here = luminance_row(j);
+                // The neighbouring rows a node above or below the centre blends with
+                // (clamped at the top and bottom).
+                let above = luminance_row(j.saturating_sub(1));
+                let below = luminance_row((j + 1).min(h - 1));
+                let mut blended = vec![0.0f32; w];
                 for &tv in &nodes {
                     let v = (j as f64 + tv) / h as f64;
                     let dw = jacobian_scale * mapping.area_factor(v);
+                    match lookup {
+                        Lookup::Nearest => blended.copy_from_slice(&here),
+                        Lookup::Bilinear => {
+                            let (other, t) = if tv < 0.5 {
+                                (&above, (0.5 - tv) as f32)
+                            } else {
+                                (&below, (tv - 0.5) as f32)
+                            };
+                            for ((b, &y0), &y1) in blended.iter_mut().zip(&here).zip(other) {
+                                *b = y0 + t * (y1 - y0);
+                            }
+                        }
+                    }
                     for i in 0..w {
+                        let left = if i > 0 {
+                            blended[i - 1]
+                        } else if periodic {
+                            blended[w - 1]
+                        } else {
+                            blended[0]
+                        };
+                        let right = if i + 1 < w {
+                            blended[i + 1]
+                        } else if periodic {
+                            blended[0]
+                        } else {
+                            blended[w - 1]
+                        };
                         for &tu in &nodes {
-                            let uv = [((i as f64 + tu) / w as f64) as f32, v as f32];
-                            let y = luminance(self.image.lookup_wrapped(uv[0], uv[1], lookup, wrap))
-                                as f64;
+                            let y = match lookup {
+                                Lookup::Nearest => blended[i],
+                                Lookup::Bilinear if tu < 0.5 => {
+                                    let t = (0.5 - tu) as f32;
+                                    blended[i] + t * (left - blended[i])
+                                }
+                                Lookup::Bilinear => {
+                                    let t = (tu - 0.5) as f32;
+                                    blended[i] + t * (right - blended[i])
+                                }
+                            } as f64;
                             ey += y * dw;
                             if y > 0.0 {
-                                let p_uv = self.planar.pdf(uv) as f64;
+                                let p_uv = if constant_per_texel {
+                                    texel_pdf[i]
+                                } else {
+                                    let u = ((i as f64 + tu) / w as f64) as f32;
+                                    self.planar.pdf([u, v as f32]) as f64
+                                };
                                 ey2p += if p_uv > 0.0 {
                                     y * y * dw * dw / p_uv
                                 } else {
@@ -655,12 +733,20 @@ fn batch<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&I) -> O + Syn
 
 /// The sampler for `options` over `image` (already in the light's mapping),
 /// `∫ L dω` of the unscaled image, and whether MIS compensation took effect.
-fn build_sampler(image: &EnvImage, options: &LightOptions) -> (Planar, [f64; 3], bool) {
+/// `rows_done` hears of every image row once its importance (or, for the bilinear
+/// density, its sums) is done: the one pass over the texels.
+fn build_sampler(
+    image: &EnvImage,
+    options: &LightOptions,
+    rows_done: &(dyn Fn(usize) + Sync),
+) -> (Planar, [f64; 3], bool) {
     let (w, h) = (image.width(), image.height());
     let mapping = options.mapping;
     let init = || LuminanceRows::new(w);
     let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
-        importance_row(image, options.lookup, mapping, cache, j, out)
+        let sums = importance_row(image, options.lookup, mapping, cache, j, out);
+        rows_done(1);
+        sums
     };
     let integral = |row_sums: &[[f64; 3]]| integral_rgb(row_sums, w, options.lookup, mapping);
     match options.density {
