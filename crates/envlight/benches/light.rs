@@ -9,6 +9,7 @@ mod baseline;
 
 use baseline::BaselineLight;
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
+use envlight::light::Sampler;
 use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Lookup, Vec3};
 use std::hint::black_box;
 use std::sync::OnceLock;
@@ -25,15 +26,36 @@ fn sky(width: usize) -> &'static EnvImage {
     slot.get_or_init(|| builtin::sky(width, width / 2))
 }
 
-fn light(width: usize, lookup: Lookup) -> EnvironmentLight {
+fn light(width: usize, lookup: Lookup, sampler: Sampler) -> EnvironmentLight {
     let options = LightOptions {
         lookup,
+        sampler,
         ..Default::default()
     };
     EnvironmentLight::new(sky(width).clone(), options).unwrap()
 }
 
+/// Every output of a sample folded into one number, so the benchmark cannot skip
+/// computing any of them (summing only the pdf let the compiler drop the radiance
+/// lookup and the direction).
+fn checksum(s: envlight::LightSample) -> f32 {
+    s.pdf
+        + s.direction.x
+        + s.direction.y
+        + s.direction.z
+        + s.radiance[0]
+        + s.radiance[1]
+        + s.radiance[2]
+}
+
+/// [`checksum`] for the baseline's `(direction, pdf, radiance)`.
+fn baseline_checksum(s: (Vec3, f32, [f32; 3])) -> f32 {
+    let (d, pdf, l) = s;
+    pdf + d.x + d.y + d.z + l[0] + l[1] + l[2]
+}
+
 const QUERIES: usize = 4096;
+const COLD_QUERIES: usize = 1 << 20;
 
 fn random_xi() -> Vec<[f32; 2]> {
     (0..QUERIES as u64)
@@ -98,16 +120,23 @@ fn bench_queries(c: &mut Criterion) {
     let width = 4096;
     let base = BaselineLight::new(sky(width).clone());
     let lights = [
-        ("envlight-bilinear", light(width, Lookup::Bilinear)),
-        ("envlight-nearest", light(width, Lookup::Nearest)),
+        (
+            "envlight-bilinear",
+            light(width, Lookup::Bilinear, Sampler::Inversion),
+        ),
+        (
+            "envlight-nearest",
+            light(width, Lookup::Nearest, Sampler::Inversion),
+        ),
     ];
+    let alias = light(width, Lookup::Bilinear, Sampler::Alias);
 
     let mut group = c.benchmark_group("sample");
     group.throughput(Throughput::Elements(QUERIES as u64));
     group.bench_function("baseline", |b| {
         b.iter(|| {
             xi.iter()
-                .map(|&x| base.sample(black_box(x)).map_or(0.0, |s| s.1))
+                .map(|&x| base.sample(black_box(x)).map_or(0.0, baseline_checksum))
                 .sum::<f32>()
         })
     });
@@ -115,11 +144,18 @@ fn bench_queries(c: &mut Criterion) {
         group.bench_function(*name, |b| {
             b.iter(|| {
                 xi.iter()
-                    .map(|&x| l.sample(black_box(x)).map_or(0.0, |s| s.pdf))
+                    .map(|&x| l.sample(black_box(x)).map_or(0.0, checksum))
                     .sum::<f32>()
             })
         });
     }
+    group.bench_function("envlight-alias-bilinear", |b| {
+        b.iter(|| {
+            xi.iter()
+                .map(|&x| alias.sample(black_box(x)).map_or(0.0, checksum))
+                .sum::<f32>()
+        })
+    });
     let mut out = vec![None; QUERIES * 64];
     let many: Vec<[f32; 2]> = (0..out.len() as u64)
         .map(|k| envlight::rng::xi_2d(5, k))
@@ -127,6 +163,31 @@ fn bench_queries(c: &mut Criterion) {
     group.throughput(Throughput::Elements(out.len() as u64));
     group.bench_function("envlight-batch-all-threads", |b| {
         b.iter(|| lights[0].1.sample_batch(black_box(&many), &mut out))
+    });
+    group.finish();
+
+    // Cold caches: a million fresh ξ per pass, so each query touches parts of the
+    // map's data (48 MB of CDFs and 100 MB of texels for the baseline) that no
+    // recent query brought in, as in a renderer whose samples wander the map.
+    let cold: Vec<[f32; 2]> = (0..COLD_QUERIES as u64)
+        .map(|k| envlight::rng::xi_2d(77, k))
+        .collect();
+    let mut group = c.benchmark_group("sample-cold");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(COLD_QUERIES as u64));
+    group.bench_function("baseline", |b| {
+        b.iter(|| {
+            cold.iter()
+                .map(|&x| base.sample(black_box(x)).map_or(0.0, baseline_checksum))
+                .sum::<f32>()
+        })
+    });
+    group.bench_function("envlight-bilinear", |b| {
+        b.iter(|| {
+            cold.iter()
+                .map(|&x| lights[0].1.sample(black_box(x)).map_or(0.0, checksum))
+                .sum::<f32>()
+        })
     });
     group.finish();
 
@@ -146,6 +207,14 @@ fn bench_queries(c: &mut Criterion) {
         b.iter(|| {
             xi.iter()
                 .map(|&x| planar.sample_continuous(black_box(x)).pdf)
+                .sum::<f32>()
+        })
+    });
+    let alias_planar = envlight::alias::AliasTable2D::new(base.importance(), width);
+    group.bench_function("envlight-alias", |b| {
+        b.iter(|| {
+            xi.iter()
+                .map(|&x| alias_planar.sample_continuous(black_box(x)).pdf)
                 .sum::<f32>()
         })
     });

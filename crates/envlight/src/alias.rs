@@ -157,18 +157,18 @@ impl AliasTable2D {
     }
 
     /// Density of cell `[iu, iv]`: `f[iv][iu] / I`, 0 for a zero function.
-    #[inline]
+    #[inline(always)]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
         self.index_pdf(iv * self.nu + iu)
     }
 
-    #[inline]
+    #[inline(always)]
     fn index_pdf(&self, index: usize) -> f32 {
         self.value_pdf(self.func[index])
     }
 
     /// `value / I` for a cell's (sanitised) function value, 0 for a zero function.
-    #[inline]
+    #[inline(always)]
     fn value_pdf(&self, value: f32) -> f32 {
         if self.integral > 0.0 {
             (value as f64 / self.integral) as f32
@@ -178,7 +178,7 @@ impl AliasTable2D {
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
         self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
@@ -190,7 +190,7 @@ impl AliasTable2D {
     /// and a 48-bit fraction that makes the keep-or-alias test; the fraction left
     /// over from that test, rescaled to `[0, 1)`, gives the offset along u (its top
     /// bits) and along v (the rest). Components outside `[0, 1)` or NaN are clamped.
-    #[inline]
+    #[inline(always)]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
         let bits = (fixed_24(xi[0]) << 24) | fixed_24(xi[1]);
         let scaled = bits as u128 * self.slots.len() as u128;
@@ -288,7 +288,7 @@ fn build_slots(func: &[f32], total: f64) -> Vec<Slot> {
 }
 
 /// `⌊2²⁴ ξ⌋` clamped to `[0, 2²⁴)`; NaN gives 0.
-#[inline]
+#[inline(always)]
 fn fixed_24(xi: f32) -> u64 {
     // Scaling by a power of two is exact; `as` saturates and maps NaN to 0.
     ((xi * (1u32 << 24) as f32) as u32).min((1 << 24) - 1) as u64

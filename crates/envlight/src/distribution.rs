@@ -85,16 +85,22 @@ impl GuidedCdf<'_> {
     }
 
     /// Width of cell `o` in CDF units (0 for a cell with `f = 0`).
-    #[inline]
+    #[inline(always)]
     fn width(&self, o: usize) -> u32 {
         self.cdf[o + 1] - self.cdf[o]
     }
 
-    /// The cell `o` with `cdf[o] <= x < cdf[o + 1]`, for `x < CDF_ONE`. Cells of zero
-    /// width never satisfy this, so they are never returned.
-    #[inline]
-    fn find(&self, x: u32) -> usize {
-        let mut o = self.guide[(x as u64 >> self.shift) as usize] as usize;
+    /// The guide table's answer for `x`: the first cell the search must consider.
+    #[inline(always)]
+    fn first_candidate(&self, x: u32) -> usize {
+        self.guide[(x as u64 >> self.shift) as usize] as usize
+    }
+
+    /// Steps forward from `o` to the cell `o` with `cdf[o] <= x < cdf[o + 1]`, for
+    /// `x < CDF_ONE`. Cells of zero width never satisfy this, so they are never
+    /// returned.
+    #[inline(always)]
+    fn scan(&self, mut o: usize, x: u32) -> usize {
         // Ends by cdf[n] = CDF_ONE > x at the latest.
         while self.cdf[o + 1] <= x {
             o += 1;
@@ -103,10 +109,38 @@ impl GuidedCdf<'_> {
     }
 
     /// Continuous sample: the cell, the offset in `[0, 1)` within it, and its width.
-    #[inline]
+    #[inline(always)]
     fn sample(&self, xi: f32) -> (usize, f64, u32) {
+        self.sample_hinted(xi, |_| {})
+    }
+
+    /// Continuous sample as a point: the cell, the point `x ∈ [0, 1)` in it (placed
+    /// with [`place_in_cell_f64`]'s guarantee), and the cell's width.
+    ///
+    /// `x = (o + (t - c[o]) / w) / n` is computed as `(o w + t - c[o]) / (w n)`, one
+    /// division instead of two on the sample's critical path.
+    #[inline(always)]
+    fn sample_point(&self, xi: f32, hint: impl FnOnce(usize)) -> (usize, f32, u32) {
         let (x, t) = to_fixed(xi);
-        let o = self.find(x);
+        let candidate = self.first_candidate(x);
+        hint(candidate);
+        let o = self.scan(candidate, x);
+        let lo = self.cdf[o];
+        let width = self.cdf[o + 1] - lo;
+        let n = self.len();
+        let w = width as f64;
+        let point = (len_f64(o) * w + (t - lo as f64)) / (w * len_f64(n));
+        (o, nudge_into_cell(point as f32, o, n), width)
+    }
+
+    /// [`Self::sample`], telling `hint` the guide table's first candidate cell before
+    /// the CDF is read (see [`Distribution2D::sample_continuous_hinted`]).
+    #[inline(always)]
+    fn sample_hinted(&self, xi: f32, hint: impl FnOnce(usize)) -> (usize, f64, u32) {
+        let (x, t) = to_fixed(xi);
+        let candidate = self.first_candidate(x);
+        hint(candidate);
+        let o = self.scan(candidate, x);
         let lo = self.cdf[o];
         let width = self.cdf[o + 1] - lo;
         // t < cdf[o + 1] because ⌊t⌋ = x is, so the offset stays below 1.
@@ -127,7 +161,7 @@ impl GuidedCdf<'_> {
 /// The cell of `x ∈ [0, 1]` on a grid of `n` cells, `⌊x n⌋` clamped to `[0, n-1]`.
 /// Every lookup (pdf, invert) and every sample placement goes through this one
 /// function, so they agree about which cell a point is in.
-#[inline]
+#[inline(always)]
 pub(crate) fn cell_index(x: f32, n: usize) -> usize {
     floor_index(x * len_f32(n), n)
 }
@@ -139,7 +173,13 @@ pub(crate) fn cell_index(x: f32, n: usize) -> usize {
 /// differ from the sampled cell's by any factor.
 #[inline(always)]
 pub(crate) fn place_in_cell_f64(cell: usize, frac: f64, n: usize) -> f32 {
-    let mut x = (((len_f64(cell) + frac) / len_f64(n)) as f32).min(ONE_MINUS_EPSILON);
+    nudge_into_cell(((len_f64(cell) + frac) / len_f64(n)) as f32, cell, n)
+}
+
+/// Moves `x` (already within a few ulps of cell `cell`) into it, and below 1.
+#[inline(always)]
+fn nudge_into_cell(x: f32, cell: usize, n: usize) -> f32 {
+    let mut x = x.min(ONE_MINUS_EPSILON);
     for _ in 0..4 {
         match cell_index(x, n).cmp(&cell) {
             std::cmp::Ordering::Greater => x = x.next_down(),
@@ -424,7 +464,7 @@ pub struct Distribution2D {
 }
 
 /// A continuous sample of a 2D distribution.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample2D {
     /// The point `[u, v]` in `[0, 1)²`.
     pub uv: [f32; 2],
@@ -544,7 +584,7 @@ impl Distribution2D {
             + self.marginal.memory_bytes()
     }
 
-    #[inline]
+    #[inline(always)]
     fn row(&self, v: usize) -> GuidedCdf<'_> {
         let bits = guide_bits(self.nu);
         let len = 1usize << bits;
@@ -557,35 +597,45 @@ impl Distribution2D {
 
     /// Density of cell `[iu, iv]`: `nu nv · width_v(iv) · width_u(iu | iv) /
     /// CDF_ONE²`, 0 for a zero function.
-    #[inline]
+    #[inline(always)]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
         let wv = self.marginal.view().width(iv);
         let wu = self.row(iv).width(iu);
         self.pdf_of_widths(wu, wv)
     }
 
-    #[inline]
+    #[inline(always)]
     fn pdf_of_widths(&self, wu: u32, wv: u32) -> f32 {
         (wu as f64 * wv as f64 * self.pdf_scale) as f32
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
         self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`
     /// picks the row from the marginal, `ξ0` the position within that row.
-    #[inline]
+    #[inline(always)]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        let (iv, dv, wv) = self.marginal.view().sample(xi[1]);
-        let (iu, du, wu) = self.row(iv).sample(xi[0]);
+        self.sample_continuous_hinted(xi, |_| {})
+    }
+
+    /// [`Self::sample_continuous`], telling `hint` an early estimate of the point
+    /// (the centre of the first cell the row's guide table names, usually the
+    /// sampled cell or its neighbour) before the row's CDF is read. A caller can
+    /// start fetching what it will read at the point, such as the texels of a
+    /// radiance lookup, while the search finishes: on a large map that overlaps two
+    /// cache misses that would otherwise follow each other.
+    #[inline(always)]
+    pub fn sample_continuous_hinted(&self, xi: [f32; 2], hint: impl FnOnce([f32; 2])) -> Sample2D {
+        let (iv, v, wv) = self.marginal.view().sample_point(xi[1], |_| {});
+        let (iu, u, wu) = self.row(iv).sample_point(xi[0], |guess| {
+            hint([((len_f64(guess) + 0.5) / len_f64(self.nu)) as f32, v])
+        });
         Sample2D {
-            uv: [
-                place_in_cell_f64(iu, du, self.nu),
-                place_in_cell_f64(iv, dv, self.nv),
-            ],
+            uv: [u, v],
             pdf: self.pdf_of_widths(wu, wv),
             cell: [iu, iv],
         }
@@ -698,7 +748,11 @@ mod tests {
             }
             for x in probes.into_iter().map(|x| x.min(CDF_ONE - 1)) {
                 let expected = (0..n).rev().find(|&o| d.cdf()[o] <= x).unwrap();
-                assert_eq!(view.find(x), expected, "n={n} x={x}");
+                assert_eq!(
+                    view.scan(view.first_candidate(x), x),
+                    expected,
+                    "n={n} x={x}"
+                );
                 assert!(view.width(expected) > 0);
             }
         }

@@ -221,7 +221,7 @@ impl Hierarchical2D {
     }
 
     /// Density of cell `[iu, iv]`: `f[iv][iu] / I`, 0 for a zero function.
-    #[inline]
+    #[inline(always)]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
         if self.integral > 0.0 {
             (self.value(iu, iv) as f64 / self.integral) as f32
@@ -231,14 +231,14 @@ impl Hierarchical2D {
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline]
+    #[inline(always)]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
         self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// The block `[a, b, c, d]` starting at `index`; zeros past the end (a
     /// speculative load of a child that does not exist).
-    #[inline]
+    #[inline(always)]
     fn raw_block(&self, index: usize) -> [f32; 4] {
         match self.nodes.get(index..index + 4) {
             Some(&[a, b, c, d]) => [a, b, c, d],
@@ -248,7 +248,7 @@ impl Hierarchical2D {
 
     /// The block `[a, b, c, d]` starting at `index` in `f64`; zeros past the end,
     /// which a walk over a non-zero function never reaches.
-    #[inline]
+    #[inline(always)]
     fn block(&self, index: usize) -> [f64; 4] {
         match self.nodes.get(index..index + 4) {
             Some(&[a, b, c, d]) => [a as f64, b as f64, c as f64, d as f64],
@@ -259,7 +259,7 @@ impl Hierarchical2D {
     /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`] by walking the
     /// pyramid from the root (see the module docs). Components outside `[0, 1)` or
     /// NaN are clamped.
-    #[inline]
+    #[inline(always)]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
         let (mut xi0, mut xi1) = (unit(xi[0]), unit(xi[1]));
         if self.integral <= 0.0 {

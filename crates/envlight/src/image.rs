@@ -205,7 +205,7 @@ impl EnvImage {
 
     /// Radiance at `(u, v)` with the given reconstruction and treatment of u; v
     /// always clamps.
-    #[inline]
+    #[inline(always)]
     pub fn lookup_wrapped(&self, u: f32, v: f32, mode: Lookup, wrap: WrapU) -> [f32; 3] {
         match mode {
             Lookup::Nearest => self.nearest(u, v, wrap),
@@ -226,7 +226,7 @@ impl EnvImage {
         self.bilinear(u, v, WrapU::Periodic)
     }
 
-    #[inline]
+    #[inline(always)]
     fn nearest(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
         let (w, h) = (self.width, self.height);
         let x = match wrap {
@@ -236,11 +236,24 @@ impl EnvImage {
         self.texel(x, floor_index(v * len_f32(h), h))
     }
 
+    /// Starts loading the texels a lookup at `(u, v)` will read (for a point in
+    /// `[0, 1]²`), without waiting for them: a hint to the CPU that changes no
+    /// result.
+    #[inline(always)]
+    pub(crate) fn prefetch(&self, u: f32, v: f32) {
+        let (w, h) = (self.width, self.height);
+        let x = floor_index(u * len_f32(w), w);
+        // The rows a bilinear lookup blends; a nearest lookup reads one of them.
+        let (y0, y1, _) = clamped_pair(v, h);
+        prefetch_read(&self.texels[y0 * w + x]);
+        prefetch_read(&self.texels[y1 * w + x]);
+    }
+
     /// Texel centres sit at `(i + ½)/n`, so the lower neighbour of a coordinate is
     /// `⌊u n - ½⌋`, which is -1 left of the first centre. Each axis is shifted so
     /// that index is never negative before the floor (by a period for a periodic u,
     /// by one texel for a clamped axis), then mapped back.
-    #[inline]
+    #[inline(always)]
     fn bilinear(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
         let (w, h) = (self.width, self.height);
         let (x0, x1, fs) = match wrap {
@@ -264,6 +277,22 @@ impl EnvImage {
         }
         out
     }
+}
+
+/// Asks the CPU to bring the cache line holding `r` closer (a no-op on other
+/// architectures).
+#[inline(always)]
+fn prefetch_read<T>(r: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint: it never faults and has no visible effect, and
+    // the address comes from a live reference anyway. SSE, which provides it, is
+    // part of the x86-64 baseline.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
 }
 
 /// `u` reduced into `[0, 1)` (for u outside it: the lookups' u is periodic).

@@ -16,7 +16,7 @@ use std::f32::consts::PI;
 pub const EQUIRECT_JACOBIAN: f32 = 2.0 * PI * PI;
 
 /// The unit direction at image point `(u, v)`, and `sin θ` at it.
-#[inline]
+#[inline(always)]
 pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
     let (sin_theta, cos_theta) = sin_cos_pi(v);
     let (sin_phi, cos_phi) = sin_cos_pi(2.0 * u);
@@ -33,7 +33,7 @@ pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
 /// θ is computed as `atan2(√(x² + y²), z)`, which equals `acos(z)` for unit vectors
 /// but keeps full precision near the poles, where `acos` of an f32 `z` is only good
 /// to about 3·10⁻⁴ rad (a twentieth of a texel on a 512-row map).
-#[inline]
+#[inline(always)]
 pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
     direction_to_equirect_and_sin(d).0
 }
@@ -41,7 +41,7 @@ pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
 /// [`direction_to_equirect`] and `sin θ` at `d` (any non-zero length), read off the
 /// direction as `√(x² + y²) / |d|` rather than recomputed from `v`: no
 /// trigonometry, and full relative precision next to the poles.
-#[inline]
+#[inline(always)]
 pub fn direction_to_equirect_and_sin(d: Vec3) -> ([f32; 2], f32) {
     let r2 = d.x * d.x + d.y * d.y;
     let r = r2.sqrt();

@@ -104,7 +104,12 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         (
             per_call_ns(&|| {
                 xi.iter()
-                    .map(|&x| light.sample(x).map_or(0.0, |s| s.pdf))
+                    // Every output in the sum, so none of them can be skipped.
+                    .map(|&x| {
+                        light.sample(x).map_or(0.0, |s| {
+                            s.pdf + s.direction.x + s.direction.y + s.direction.z + s.radiance[1]
+                        })
+                    })
                     .sum()
             }),
             per_call_ns(&|| dirs.iter().map(|&d| light.pdf(d)).sum()),
