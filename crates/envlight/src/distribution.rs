@@ -108,10 +108,26 @@ impl GuidedCdf<'_> {
         o
     }
 
+    /// The cell whose CDF segment holds `ξ`, `ξ` on the fixed-point scale (`t`),
+    /// and the segment `(c[o], width)`. `hint` hears the guide table's first
+    /// candidate cell before the CDF is read (see
+    /// [`Distribution2D::sample_continuous_hinted`]).
+    #[inline(always)]
+    fn locate(&self, xi: f32, hint: impl FnOnce(usize)) -> (usize, f64, u32, u32) {
+        let (x, t) = to_fixed(xi);
+        let candidate = self.first_candidate(x);
+        hint(candidate);
+        let o = self.scan(candidate, x);
+        let lo = self.cdf[o];
+        (o, t, lo, self.cdf[o + 1] - lo)
+    }
+
     /// Continuous sample: the cell, the offset in `[0, 1)` within it, and its width.
     #[inline(always)]
     fn sample(&self, xi: f32) -> (usize, f64, u32) {
-        self.sample_hinted(xi, |_| {})
+        let (o, t, lo, width) = self.locate(xi, |_| {});
+        // t < cdf[o + 1] because ⌊t⌋ = x is, so the offset stays below 1.
+        (o, (t - lo as f64) / width as f64, width)
     }
 
     /// Continuous sample as a point: the cell, the point `x ∈ [0, 1)` in it (placed
@@ -121,30 +137,11 @@ impl GuidedCdf<'_> {
     /// division instead of two on the sample's critical path.
     #[inline(always)]
     fn sample_point(&self, xi: f32, hint: impl FnOnce(usize)) -> (usize, f32, u32) {
-        let (x, t) = to_fixed(xi);
-        let candidate = self.first_candidate(x);
-        hint(candidate);
-        let o = self.scan(candidate, x);
-        let lo = self.cdf[o];
-        let width = self.cdf[o + 1] - lo;
+        let (o, t, lo, width) = self.locate(xi, hint);
         let n = self.len();
         let w = width as f64;
         let point = (len_f64(o) * w + (t - lo as f64)) / (w * len_f64(n));
         (o, nudge_into_cell(point as f32, o, n), width)
-    }
-
-    /// [`Self::sample`], telling `hint` the guide table's first candidate cell before
-    /// the CDF is read (see [`Distribution2D::sample_continuous_hinted`]).
-    #[inline(always)]
-    fn sample_hinted(&self, xi: f32, hint: impl FnOnce(usize)) -> (usize, f64, u32) {
-        let (x, t) = to_fixed(xi);
-        let candidate = self.first_candidate(x);
-        hint(candidate);
-        let o = self.scan(candidate, x);
-        let lo = self.cdf[o];
-        let width = self.cdf[o + 1] - lo;
-        // t < cdf[o + 1] because ⌊t⌋ = x is, so the offset stays below 1.
-        (o, (t - lo as f64) / width as f64, width)
     }
 
     /// The `ξ` that [`Self::sample`] maps to the point `x ∈ [0, 1]`.
@@ -410,9 +407,9 @@ impl Distribution1D {
     /// whose CDF segment holds `ξ`, then places `x` linearly inside it.
     #[inline]
     pub fn sample_continuous(&self, xi: f32) -> Sample1D {
-        let (cell, frac, width) = self.view().sample(xi);
+        let (cell, x, width) = self.view().sample_point(xi, |_| {});
         Sample1D {
-            x: place_in_cell_f64(cell, frac, self.len()),
+            x,
             pdf: (width as f64 * self.pdf_scale) as f32,
             cell,
         }
