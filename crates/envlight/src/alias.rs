@@ -16,8 +16,8 @@
 //! `I = Σ f / (nu nv)`: the density of [`Distribution2D`], which matches it to
 //! within its CDFs' 2⁻³² resolution.
 //!
-//! **Trade-off.** Sampling is O(1) (one table entry and one function value are read)
-//! where inversion needs two binary searches, but the map from `ξ` to the point is
+//! **Trade-off.** Sampling is O(1) (one table entry and one function value are read),
+//! like inversion with its guide tables, but the map from `ξ` to the point is
 //! scrambled: nearby `ξ` land in unrelated cells, so stratified or low-discrepancy
 //! `ξ` lose their advantage, and there is no inverse.
 //!

@@ -37,7 +37,8 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Sampler {
     /// CDF inversion (the seed's method): a row from the marginal, then a column
-    /// from the row. Two binary searches; keeps stratification; invertible.
+    /// from the row, each found with a guide table and a short scan of a fixed-point
+    /// CDF. Keeps stratification; invertible; 5 to 6 bytes per texel.
     #[default]
     Inversion,
     /// Vose's alias table over all cells: O(1) per sample, but it breaks
@@ -296,8 +297,8 @@ impl EnvironmentLight {
     /// Builds the light and its sampling distribution (rows in parallel).
     ///
     /// Time `O(w h)` (plus the resampling for an equal-area light from a lat-long
-    /// map); memory: the image plus the sampler's data, 8 bytes per texel for the
-    /// default inversion sampler.
+    /// map); memory: the image plus the sampler's data, 5 to 6 bytes per texel for
+    /// the default inversion sampler.
     ///
     /// # Errors
     /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
