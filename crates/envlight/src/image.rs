@@ -4,7 +4,7 @@
 //! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
 
 use crate::error::{Error, Result, TexelPos};
-use crate::math::{floor_index, len_f32};
+use crate::math::{floor_index, len_f32, prefetch_read};
 
 /// How radiance between texel centres is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -277,22 +277,6 @@ impl EnvImage {
         }
         out
     }
-}
-
-/// Asks the CPU to bring the cache line holding `r` closer (a no-op on other
-/// architectures).
-#[inline(always)]
-fn prefetch_read<T>(r: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint: it never faults and has no visible effect, and
-    // the address comes from a live reference anyway. SSE, which provides it, is
-    // part of the x86-64 baseline.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = r;
 }
 
 /// `u` reduced into `[0, 1)` (for u outside it: the lookups' u is periodic).

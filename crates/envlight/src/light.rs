@@ -22,7 +22,7 @@
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
-use crate::distribution::{for_each_row, Distribution2D, Sample2D};
+use crate::distribution::{for_each_row, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
@@ -530,40 +530,49 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
-        match &self.planar {
-            Planar::Inversion(d) => self.sample_blocks(xi, out, false, |x| {
-                d.sample_continuous_hinted(x, |uv| self.image.prefetch(uv[0], uv[1]))
-            }),
-            Planar::Alias(d) => self.sample_blocks(xi, out, false, |x| d.sample_continuous(x)),
-            Planar::Hierarchical(d) => {
-                self.sample_blocks(xi, out, false, |x| d.sample_continuous(x))
+        let one_by_one = |sample: &(dyn Fn([f32; 2]) -> Sample2D + Sync),
+                          xi: &[[f32; 2]],
+                          out: &mut [Sample2D]| {
+            for (o, &x) in out.iter_mut().zip(xi) {
+                *o = sample(x);
             }
-            Planar::Bilinear(d) => self.sample_blocks(xi, out, true, |x| d.sample_continuous(x)),
+        };
+        match &self.planar {
+            Planar::Inversion(d) => self.sample_blocks(xi, out, false, |xi, out| {
+                d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1]))
+            }),
+            Planar::Alias(d) => self.sample_blocks(xi, out, false, |xi, out| {
+                one_by_one(&|x| d.sample_continuous(x), xi, out)
+            }),
+            Planar::Hierarchical(d) => self.sample_blocks(xi, out, false, |xi, out| {
+                one_by_one(&|x| d.sample_continuous(x), xi, out)
+            }),
+            Planar::Bilinear(d) => self.sample_blocks(xi, out, true, |xi, out| {
+                one_by_one(&|x| d.sample_continuous(x), xi, out)
+            }),
         }
     }
 
-    /// [`Self::sample_batch`] in two stages per block of `BLOCK` samples: all the
-    /// planar samples, then all the directions, pdfs and radiance lookups. A single
-    /// sample is one long chain of dependent steps (CDF search, placement, sin/cos,
-    /// texel loads) that the CPU cannot overlap with the next; a stage runs `BLOCK`
-    /// independent short chains, which it can. The first stage also starts loading
-    /// the texels the second will read.
+    /// [`Self::sample_batch`] in two stages per block of samples: all the planar
+    /// samples (`planar_block`, which may overlap their memory accesses, see
+    /// [`Distribution2D::sample_block`]), then all the directions, pdfs and radiance
+    /// lookups. A single sample is one long chain of dependent steps (CDF search,
+    /// placement, sin/cos, texel loads) that the CPU cannot overlap with the next; a
+    /// stage runs a block of independent short chains, which it can.
     #[inline(always)]
     fn sample_blocks(
         &self,
         xi: &[[f32; 2]],
         out: &mut [Option<LightSample>],
         continuous_density: bool,
-        planar_sample: impl Fn([f32; 2]) -> Sample2D + Sync,
+        planar_block: impl Fn(&[[f32; 2]], &mut [Sample2D]) + Sync,
     ) {
-        const BLOCK: usize = 32;
         batch_chunks(xi, out, |xi, out| {
-            let mut planar = [Sample2D::default(); BLOCK];
-            for (xi, out) in xi.chunks(BLOCK).zip(out.chunks_mut(BLOCK)) {
-                for (p, &x) in planar.iter_mut().zip(xi) {
-                    *p = planar_sample(x);
-                }
-                for (o, &p) in out.iter_mut().zip(&planar) {
+            let mut planar = [Sample2D::default(); STAGED_BLOCK];
+            for (xi, out) in xi.chunks(STAGED_BLOCK).zip(out.chunks_mut(STAGED_BLOCK)) {
+                let planar = &mut planar[..xi.len()];
+                planar_block(xi, planar);
+                for (o, &p) in out.iter_mut().zip(planar.iter()) {
                     *o = self.finish_sample(p, continuous_density);
                 }
             }

@@ -33,6 +33,22 @@ pub(crate) fn floor_index(x: f32, n: usize) -> usize {
     (i as usize).min(n - 1)
 }
 
+/// Asks the CPU to bring the cache line holding `r` closer (a no-op on other
+/// architectures).
+#[inline(always)]
+pub(crate) fn prefetch_read<T>(r: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint: it never faults and has no visible effect, and
+    // the address comes from a live reference anyway. SSE, which provides it, is
+    // part of the x86-64 baseline.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
+}
+
 /// `n` as f32 by way of i64: one instruction on x86-64, where converting a `usize`
 /// takes a sequence (it must handle values above `i64::MAX`).
 #[inline]

@@ -85,6 +85,38 @@ fn many_threads_give_bit_identical_results_to_one() {
     }
 }
 
+/// The batch path samples in blocks and stages (see `sample_batch`): for every
+/// sampler and density, and a length that is not a multiple of the block, it must
+/// give exactly what one call at a time gives.
+#[test]
+fn batch_sampling_equals_single_samples_for_every_sampler() {
+    use envlight::light::{Density, Sampler};
+    let image = builtin::sky(200, 100);
+    let xi: Vec<[f32; 2]> = (0..5_003u64).map(|k| envlight::rng::xi_2d(4, k)).collect();
+    for (sampler, density) in [
+        (Sampler::Inversion, Density::PiecewiseConstant),
+        (Sampler::Alias, Density::PiecewiseConstant),
+        (Sampler::Hierarchical, Density::PiecewiseConstant),
+        (Sampler::Inversion, Density::PiecewiseBilinear),
+    ] {
+        let options = LightOptions {
+            sampler,
+            density,
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(image.clone(), options).unwrap();
+        let mut out = vec![None; xi.len()];
+        light.sample_batch(&xi, &mut out);
+        for (k, (batched, &x)) in out.iter().zip(&xi).enumerate() {
+            assert_eq!(
+                bits(batched),
+                bits(&light.sample(x)),
+                "{sampler:?}/{density:?}: sample {k}"
+            );
+        }
+    }
+}
+
 #[test]
 fn building_is_independent_of_thread_count() {
     let image = builtin::sky(300, 150);
