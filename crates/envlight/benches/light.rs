@@ -164,6 +164,13 @@ fn bench_queries(c: &mut Criterion) {
     group.bench_function("envlight-batch-all-threads", |b| {
         b.iter(|| lights[0].1.sample_batch(black_box(&many), &mut out))
     });
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    group.bench_function("envlight-batch-1thread", |b| {
+        b.iter(|| one_thread.install(|| lights[0].1.sample_batch(black_box(&many), &mut out)))
+    });
     group.finish();
 
     // Cold caches: a million fresh ξ per pass, so each query touches parts of the
