@@ -688,11 +688,17 @@ impl EnvironmentLight {
             Mapping::EqualArea => EQUAL_AREA_JACOBIAN as f64,
         };
         let constant_per_texel = !matches!(self.planar, Planar::Bilinear(_));
-        let luminance_row =
-            |j: usize| -> Vec<f32> { self.image.row(j).iter().map(|&t| luminance(t)).collect() };
+        // Rows go to each task in runs of neighbours, so a cache of the last three
+        // rows' luminance computes each row's about once instead of three times.
+        let init = || {
+            (
+                LuminanceRows::new(w),
+                [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]],
+            )
+        };
         (0..h)
             .into_par_iter()
-            .map(|j| {
+            .map_init(init, |(cache, [above, here, below]), j| {
                 let (mut ey, mut ey2p) = (0.0f64, 0.0f64);
                 let centre_v = ((j as f64 + 0.5) / h as f64) as f32;
                 let texel_pdf: Vec<f64> = if constant_per_texel {
@@ -705,24 +711,25 @@ impl EnvironmentLight {
                 } else {
                     Vec::new()
                 };
-                let here = luminance_row(j);
                 // The neighbouring rows a node above or below the centre blends with
                 // (clamped at the top and bottom).
-                let above = luminance_row(j.saturating_sub(1));
-                let below = luminance_row((j + 1).min(h - 1));
+                above.copy_from_slice(cache.row(&self.image, j.saturating_sub(1)).0);
+                here.copy_from_slice(cache.row(&self.image, j).0);
+                below.copy_from_slice(cache.row(&self.image, (j + 1).min(h - 1)).0);
+                let (above, here, below) = (&*above, &*here, &*below);
                 let mut blended = vec![0.0f32; w];
                 for &tv in &nodes {
                     let v = (j as f64 + tv) / h as f64;
                     let dw = jacobian_scale * mapping.area_factor(v);
                     match lookup {
-                        Lookup::Nearest => blended.copy_from_slice(&here),
+                        Lookup::Nearest => blended.copy_from_slice(here),
                         Lookup::Bilinear => {
                             let (other, t) = if tv < 0.5 {
-                                (&above, (0.5 - tv) as f32)
+                                (above, (0.5 - tv) as f32)
                             } else {
-                                (&below, (tv - 0.5) as f32)
+                                (below, (tv - 0.5) as f32)
                             };
-                            for ((b, &y0), &y1) in blended.iter_mut().zip(&here).zip(other) {
+                            for ((b, &y0), &y1) in blended.iter_mut().zip(here).zip(other) {
                                 *b = y0 + t * (y1 - y0);
                             }
                         }
@@ -742,6 +749,32 @@ impl EnvironmentLight {
                         } else {
                             blended[w - 1]
                         };
+                        if constant_per_texel {
+                            // The pdf is constant over the texel and y is linear on
+                            // each half of it (or constant), so the four u nodes,
+                            // exact for cubics on each half, sum to closed forms:
+                            // Σ y = 4 × mean and Σ y² = 4 × mean of the square.
+                            let c = blended[i] as f64;
+                            let (sum_y, sum_y2) = match lookup {
+                                Lookup::Nearest => (4.0 * c, 4.0 * c * c),
+                                Lookup::Bilinear => {
+                                    let (l, r) =
+                                        (0.5 * (left as f64 + c), 0.5 * (c + right as f64));
+                                    let square = |a: f64, b: f64| (a * a + a * b + b * b) / 3.0;
+                                    (l + 2.0 * c + r, 2.0 * (square(l, c) + square(c, r)))
+                                }
+                            };
+                            ey += sum_y * dw;
+                            if sum_y2 > 0.0 {
+                                let p = texel_pdf[i];
+                                ey2p += if p > 0.0 {
+                                    sum_y2 * dw * dw / p
+                                } else {
+                                    f64::INFINITY
+                                };
+                            }
+                            continue;
+                        }
                         for &tu in &nodes {
                             let y = match lookup {
                                 Lookup::Nearest => blended[i],
@@ -756,12 +789,8 @@ impl EnvironmentLight {
                             } as f64;
                             ey += y * dw;
                             if y > 0.0 {
-                                let p_uv = if constant_per_texel {
-                                    texel_pdf[i]
-                                } else {
-                                    let u = ((i as f64 + tu) / w as f64) as f32;
-                                    self.planar.pdf([u, v as f32]) as f64
-                                };
+                                let u = ((i as f64 + tu) / w as f64) as f32;
+                                let p_uv = self.planar.pdf([u, v as f32]) as f64;
                                 ey2p += if p_uv > 0.0 {
                                     y * y * dw * dw / p_uv
                                 } else {
