@@ -23,7 +23,7 @@
 //!
 //! [`Distribution2D`]: crate::distribution::Distribution2D
 
-use crate::distribution::{cell_index, place_in_cell_f64, sanitize, Sample2D};
+use crate::distribution::{cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D};
 
 /// `2⁴⁸`: the two 24-bit halves of `ξ` form a 48-bit fixed-point number.
 const TWO_POW_48: f64 = (1u64 << 48) as f64;
@@ -72,6 +72,8 @@ pub struct AliasTable2D {
     slots: Vec<Slot>,
     /// `I = Σ f / (nu nv)`, summed like [`Distribution2D`](crate::distribution::Distribution2D).
     integral: f64,
+    /// `1 / I`, or 0 for a zero function (so pdfs come out 0).
+    inv_integral: f64,
     /// Bits of the leftover fraction given to the offset along u (the rest go to v).
     offset_bits: u32,
 }
@@ -123,6 +125,7 @@ impl AliasTable2D {
             func,
             slots,
             integral,
+            inv_integral: inverse_or_zero(integral),
             offset_bits,
         }
     }
@@ -170,11 +173,7 @@ impl AliasTable2D {
     /// `value / I` for a cell's (sanitised) function value, 0 for a zero function.
     #[inline(always)]
     fn value_pdf(&self, value: f32) -> f32 {
-        if self.integral > 0.0 {
-            (value as f64 / self.integral) as f32
-        } else {
-            0.0
-        }
+        (value as f64 * self.inv_integral) as f32
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
@@ -192,6 +191,16 @@ impl AliasTable2D {
     /// bits) and along v (the rest). Components outside `[0, 1)` or NaN are clamped.
     #[inline(always)]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
+        self.sample_continuous_hinted(xi, |_| {})
+    }
+
+    /// [`Self::sample_continuous`], telling `hint` the centre of the chosen cell as
+    /// soon as the table has named it, before the point is placed (see
+    /// [`Distribution2D::sample_continuous_hinted`]).
+    ///
+    /// [`Distribution2D::sample_continuous_hinted`]: crate::distribution::Distribution2D::sample_continuous_hinted
+    #[inline(always)]
+    pub fn sample_continuous_hinted(&self, xi: [f32; 2], hint: impl FnOnce([f32; 2])) -> Sample2D {
         let bits = (fixed_24(xi[0]) << 24) | fixed_24(xi[1]);
         let scaled = bits as u128 * self.slots.len() as u128;
         let slot_index = (scaled >> 48) as usize;
@@ -200,14 +209,25 @@ impl AliasTable2D {
         let keep = slot.threshold as f64 * TWO_POW_48;
         // Both sides are exact in f64 (a 48-bit integer; an f32 times 2⁴⁸), so the
         // test keeps exactly the threshold's share of the slot.
-        let (index, leftover) = if fraction < keep {
-            (slot_index, fraction / keep)
+        // Selects rather than branches (the test goes either way at random), and
+        // one division for both cases.
+        let kept = fraction < keep;
+        let index = if kept {
+            slot_index
         } else {
-            (slot.alias as usize, (fraction - keep) / (TWO_POW_48 - keep))
+            slot.alias as usize
         };
+        let (above, span) = if kept {
+            (fraction, keep)
+        } else {
+            (fraction - keep, TWO_POW_48 - keep)
+        };
+        let leftover = above / span;
         let split = (1u64 << self.offset_bits) as f64;
         let scaled_leftover = leftover * split;
-        let coarse = scaled_leftover.floor();
+        // Truncation is the floor here (the value is in [0, 2²⁴)); f64::floor is a
+        // library call on the x86-64 baseline.
+        let coarse = scaled_leftover as u32 as f64;
         let du = coarse / split;
         let dv = (scaled_leftover - coarse).min(1.0 - f64::EPSILON / 2.0);
         // 32-bit division (the table has at most u32::MAX cells) is the cheaper one.
@@ -215,6 +235,10 @@ impl AliasTable2D {
             (index as u32 / self.nu as u32) as usize,
             (index as u32 % self.nu as u32) as usize,
         );
+        hint([
+            (iu as f32 + 0.5) / self.nu as f32,
+            (iv as f32 + 0.5) / self.nv as f32,
+        ]);
         Sample2D {
             uv: [
                 place_in_cell_f64(iu, du, self.nu),

@@ -453,7 +453,10 @@ impl EnvironmentLight {
                 let s = d.sample_continuous_hinted(xi, |uv| self.image.prefetch(uv[0], uv[1]));
                 self.finish_sample(s, false)
             }
-            Planar::Alias(d) => self.finish_sample(d.sample_continuous(xi), false),
+            Planar::Alias(d) => {
+                let s = d.sample_continuous_hinted(xi, |uv| self.image.prefetch(uv[0], uv[1]));
+                self.finish_sample(s, false)
+            }
             Planar::Hierarchical(d) => self.finish_sample(d.sample_continuous(xi), false),
             Planar::Bilinear(d) => self.finish_sample(d.sample_continuous(xi), true),
         }
@@ -542,7 +545,11 @@ impl EnvironmentLight {
                 d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1]))
             }),
             Planar::Alias(d) => self.sample_blocks(xi, out, false, |xi, out| {
-                one_by_one(&|x| d.sample_continuous(x), xi, out)
+                one_by_one(
+                    &|x| d.sample_continuous_hinted(x, |uv| self.image.prefetch(uv[0], uv[1])),
+                    xi,
+                    out,
+                )
             }),
             Planar::Hierarchical(d) => self.sample_blocks(xi, out, false, |xi, out| {
                 one_by_one(&|x| d.sample_continuous(x), xi, out)
