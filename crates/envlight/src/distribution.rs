@@ -96,7 +96,13 @@ impl GuidedCdf<'_> {
     /// The guide table's answer for `x`: the first cell the search must consider.
     #[inline(always)]
     fn first_candidate(&self, x: u32) -> usize {
-        self.guide[(x as u64 >> self.shift) as usize] as usize
+        *self.guide_entry(x) as usize
+    }
+
+    /// The guide entry of `x`'s slice.
+    #[inline(always)]
+    fn guide_entry(&self, x: u32) -> &u32 {
+        &self.guide[(x as u64 >> self.shift) as usize]
     }
 
     /// Steps forward from `o` to the cell `o` with `cdf[o] <= x < cdf[o + 1]`, for
@@ -645,9 +651,9 @@ impl Distribution2D {
     #[inline(always)]
     pub fn sample_continuous_hinted(&self, xi: [f32; 2], hint: impl FnOnce([f32; 2])) -> Sample2D {
         let (iv, v, wv) = self.marginal.view().sample_point(xi[1], |_| {});
-        let (iu, u, wu) = self.row(iv).sample_point(xi[0], |guess| {
-            hint([((len_f64(guess) + 0.5) / len_f64(self.nu)) as f32, v])
-        });
+        let (iu, u, wu) = self
+            .row(iv)
+            .sample_point(xi[0], |guess| hint([self.cell_centre_u(guess), v]));
         Sample2D {
             uv: [u, v],
             pdf: self.pdf_of_widths(wu, wv),
@@ -672,29 +678,50 @@ impl Distribution2D {
             xi.len() == out.len() && xi.len() <= STAGED_BLOCK,
             "bad block"
         );
-        let mut rows = [(0usize, 0.0f32, 0u32, 0u32, 0.0f64); STAGED_BLOCK];
+        /// A sample between passes: its row, `v` and the row's width from the
+        /// marginal, and `ξ0` on the fixed-point scale (`⌊t⌋`, `t`).
+        #[derive(Clone, Copy, Default)]
+        struct InRow {
+            iv: usize,
+            v: f32,
+            wv: u32,
+            fixed: u32,
+            t: f64,
+        }
+        let mut rows = [InRow::default(); STAGED_BLOCK];
         for (row, &x) in rows.iter_mut().zip(xi) {
             let (iv, v, wv) = self.marginal.view().sample_point(x[1], |_| {});
             let (fixed, t) = to_fixed(x[0]);
-            let r = self.row(iv);
-            prefetch_read(&r.guide[(fixed as u64 >> r.shift) as usize]);
-            *row = (iv, v, wv, fixed, t);
-        }
-        let mut candidates = [0usize; STAGED_BLOCK];
-        for (c, &(iv, v, _, fixed, _)) in candidates.iter_mut().zip(&rows[..xi.len()]) {
-            let r = self.row(iv);
-            *c = r.first_candidate(fixed);
-            prefetch_read(&r.cdf[*c + 1]);
-            hint([((len_f64(*c) + 0.5) / len_f64(self.nu)) as f32, v]);
-        }
-        for ((o, &(iv, v, wv, fixed, t)), &c) in out.iter_mut().zip(&rows).zip(&candidates) {
-            let (iu, u, wu) = self.row(iv).point_from(c, fixed, t);
-            *o = Sample2D {
-                uv: [u, v],
-                pdf: self.pdf_of_widths(wu, wv),
-                cell: [iu, iv],
+            prefetch_read(self.row(iv).guide_entry(fixed));
+            *row = InRow {
+                iv,
+                v,
+                wv,
+                fixed,
+                t,
             };
         }
+        let mut candidates = [0usize; STAGED_BLOCK];
+        for (c, row) in candidates.iter_mut().zip(&rows[..xi.len()]) {
+            let cdf = self.row(row.iv);
+            *c = cdf.first_candidate(row.fixed);
+            prefetch_read(&cdf.cdf[*c + 1]);
+            hint([self.cell_centre_u(*c), row.v]);
+        }
+        for ((o, row), &c) in out.iter_mut().zip(&rows).zip(&candidates) {
+            let (iu, u, wu) = self.row(row.iv).point_from(c, row.fixed, row.t);
+            *o = Sample2D {
+                uv: [u, row.v],
+                pdf: self.pdf_of_widths(wu, row.wv),
+                cell: [iu, row.iv],
+            };
+        }
+    }
+
+    /// The centre of column `iu`, `(iu + ½) / nu`.
+    #[inline(always)]
+    fn cell_centre_u(&self, iu: usize) -> f32 {
+        ((len_f64(iu) + 0.5) / len_f64(self.nu)) as f32
     }
 
     /// The sample-space point that [`Self::sample_continuous`] maps to `uv`.

@@ -3,19 +3,6 @@
 
 use std::ops::{Add, Mul, Neg, Sub};
 
-/// `⌊x⌋` for `|x| < 2³¹`, inlined (the x86-64 baseline has no rounding
-/// instruction, so `f32::floor` is a library call). NaN gives 0; larger magnitudes
-/// saturate, which callers clamp anyway.
-#[inline]
-pub fn floor_fast(x: f32) -> f32 {
-    let t = x as i32 as f32;
-    if t > x {
-        t - 1.0
-    } else {
-        t
-    }
-}
-
 /// `⌊x⌋` clamped into `[0, n - 1]`, as an index; NaN gives 0.
 ///
 /// Three instructions on x86-64: Rust's saturating `as` adds a NaN and overflow fix-up
@@ -250,25 +237,6 @@ impl Neg for Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn floor_fast_matches_floor() {
-        for x in [
-            -2.5f32,
-            -1.0,
-            -0.5,
-            -1e-9,
-            0.0,
-            1e-9,
-            0.5,
-            1.0,
-            2.75,
-            1e6 + 0.5,
-        ] {
-            assert_eq!(floor_fast(x), x.floor(), "{x}");
-        }
-        assert_eq!(floor_fast(f32::NAN), 0.0);
-    }
 
     #[test]
     fn sin_cos_pi_matches_f64_to_f32_precision() {
