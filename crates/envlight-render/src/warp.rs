@@ -34,13 +34,7 @@ pub fn cosine_hemisphere_pdf(w: Vec3) -> f32 {
 }
 
 /// Uniform direction on the whole sphere: `z = 1 - 2 u0`, `φ = 2π u1`.
-#[inline]
-pub fn square_to_uniform_sphere(u: [f32; 2]) -> Vec3 {
-    let z = 1.0 - 2.0 * u[0];
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let (s, c) = (2.0 * PI * u[1]).sin_cos();
-    Vec3::new(r * c, r * s, z)
-}
+pub use envlight::math::uniform_sphere as square_to_uniform_sphere;
 
 /// Density of [`square_to_uniform_sphere`]: `1 / 4π` per steradian.
 pub const UNIFORM_SPHERE_PDF: f32 = 0.25 * FRAC_1_PI;

@@ -66,12 +66,7 @@ fn random_xi() -> Vec<[f32; 2]> {
 fn random_directions() -> Vec<Vec3> {
     random_xi()
         .into_iter()
-        .map(|[a, b]| {
-            let z = 1.0 - 2.0 * a;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * std::f32::consts::PI * b;
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
+        .map(envlight::math::uniform_sphere)
         .collect()
 }
 

@@ -4,7 +4,7 @@
 //! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
 
 use crate::error::{Error, Result, TexelPos};
-use crate::math::{floor_index, len_f32, prefetch_read};
+use crate::math::{floor_index, len_f32, prefetch_ptr};
 
 /// How radiance between texel centres is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -238,15 +238,18 @@ impl EnvImage {
 
     /// Starts loading the texels a lookup at `(u, v)` will read (for a point in
     /// `[0, 1]²`), without waiting for them: a hint to the CPU that changes no
-    /// result.
+    /// result. The address arithmetic is unchecked: a prefetch never faults, and a
+    /// point outside the square only wastes the hint.
     #[inline(always)]
     pub(crate) fn prefetch(&self, u: f32, v: f32) {
         let (w, h) = (self.width, self.height);
         let x = floor_index(u * len_f32(w), w);
-        // The rows a bilinear lookup blends; a nearest lookup reads one of them.
-        let (y0, y1, _) = clamped_pair(v, h);
-        prefetch_read(&self.texels[y0 * w + x]);
-        prefetch_read(&self.texels[y1 * w + x]);
+        // The rows a bilinear lookup blends (the second may be one past the last,
+        // harmlessly); a nearest lookup reads one of them.
+        let y0 = floor_index(v * len_f32(h) - 0.5, h);
+        let first = self.texels.as_ptr().wrapping_add(y0 * w + x);
+        prefetch_ptr(first);
+        prefetch_ptr(first.wrapping_add(w));
     }
 
     /// Texel centres sit at `(i + ½)/n`, so the lower neighbour of a coordinate is
@@ -267,13 +270,25 @@ impl EnvImage {
             WrapU::Clamp => clamped_pair(u, w),
         };
         let (y0, y1, ft) = clamped_pair(v, h);
-        let (row0, row1) = (self.row(y0), self.row(y1));
-        let (a, b, c, d) = (row0[x0], row0[x1], row1[x0], row1[x1]);
+        debug_assert!(x0 < w && x1 < w && y0 < h && y1 < h);
+        // SAFETY: `periodic` and `clamped_pair` clamp their indices into
+        // `[0, w - 1]` and `[0, h - 1]`, and the texels are `w h` long (checked
+        // when the image is made); unchecked reads drop six bounds checks from
+        // every lookup.
+        let (a, b, c, d) = unsafe {
+            let texel = |x: usize, y: usize| *self.texels.get_unchecked(y * w + x);
+            (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1))
+        };
+        // The four weights are ready before the texels arrive, so a lookup ends
+        // with one multiplication and two additions after its loads (nested lerps
+        // would chain six operations there). Non-negative weights of non-negative
+        // texels: the result needs no clamp.
+        let (gs, gt) = (1.0 - fs, 1.0 - ft);
+        let weights = [gs * gt, fs * gt, gs * ft, fs * ft];
         let mut out = [0.0f32; 3];
         for k in 0..3 {
-            let top = a[k] + fs * (b[k] - a[k]);
-            let bottom = c[k] + fs * (d[k] - c[k]);
-            out[k] = (top + ft * (bottom - top)).max(0.0);
+            out[k] =
+                (weights[0] * a[k] + weights[1] * b[k]) + (weights[2] * c[k] + weights[3] * d[k]);
         }
         out
     }

@@ -27,8 +27,8 @@ use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
 use crate::image::{EnvImage, Lookup, WrapU};
-use crate::mapping::{direction_to_equirect_and_sin, equirect_to_direction, EQUIRECT_JACOBIAN};
-use crate::math::{Rotation, Vec3};
+use crate::mapping::{direction_to_equirect_and_csc, equirect_to_direction, EQUIRECT_JACOBIAN};
+use crate::math::{is_positive_finite, Rotation, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -131,15 +131,16 @@ impl Mapping {
         }
     }
 
-    /// The image point looking along `d`, and `dω / du dv` there.
+    /// The image point looking along `d`, and `du dv / dω` there (the reciprocal
+    /// of the Jacobian; +∞ at the poles of the lat-long map).
     #[inline(always)]
     fn to_uv(self, d: Vec3) -> ([f32; 2], f32) {
         match self {
             Mapping::Equirectangular => {
-                let (uv, sin_theta) = direction_to_equirect_and_sin(d);
-                (uv, EQUIRECT_JACOBIAN * sin_theta)
+                let (uv, csc_theta) = direction_to_equirect_and_csc(d);
+                (uv, csc_theta * (1.0 / EQUIRECT_JACOBIAN))
             }
-            Mapping::EqualArea => (equal_area::sphere_to_square(d), EQUAL_AREA_JACOBIAN),
+            Mapping::EqualArea => (equal_area::sphere_to_square(d), 1.0 / EQUAL_AREA_JACOBIAN),
         }
     }
 
@@ -479,7 +480,7 @@ impl EnvironmentLight {
         } else {
             s.pdf / jacobian
         };
-        if !(jacobian > 0.0 && pdf > 0.0 && pdf.is_finite()) {
+        if !(jacobian > 0.0 && is_positive_finite(pdf)) {
             return None;
         }
         Some(LightSample {
@@ -507,12 +508,11 @@ impl EnvironmentLight {
     /// `planar_pdf(uv) / (dω/du dv)` at the image point of `direction`.
     #[inline(always)]
     fn solid_angle_pdf(&self, direction: Vec3, planar_pdf: impl Fn([f32; 2]) -> f32) -> f32 {
-        let (uv, jacobian) = self.options.mapping.to_uv(self.to_light(direction));
-        if jacobian.is_nan() || jacobian <= 0.0 {
-            return 0.0;
-        }
-        let pdf = planar_pdf(uv) / jacobian;
-        if pdf.is_finite() {
+        let (uv, inv_jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+        let pdf = planar_pdf(uv) * inv_jacobian;
+        // A pole (infinite 1/J) or a NaN from a degenerate direction, and a NaN or
+        // infinite pdf, give 0.
+        if inv_jacobian < f32::INFINITY && pdf < f32::INFINITY {
             pdf
         } else {
             0.0

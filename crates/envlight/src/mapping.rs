@@ -9,7 +9,7 @@
 //! So the top row looks at +z, `u = 0` at +x and `u = 0.25` at +y.
 
 use crate::distribution::ONE_MINUS_EPSILON;
-use crate::math::{atan2_fast, sin_cos_pi, Vec3};
+use crate::math::{atan2_pair, sin_cos_pi, Vec3};
 use std::f32::consts::PI;
 
 /// `dω / (du dv) = 2π² sin θ`: this constant times `sin θ`.
@@ -35,24 +35,25 @@ pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
 /// to about 3·10⁻⁴ rad (a twentieth of a texel on a 512-row map).
 #[inline(always)]
 pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
-    direction_to_equirect_and_sin(d).0
+    direction_to_equirect_and_csc(d).0
 }
 
-/// [`direction_to_equirect`] and `sin θ` at `d` (any non-zero length), read off the
-/// direction as `√(x² + y²) / |d|` rather than recomputed from `v`: no
-/// trigonometry, and full relative precision next to the poles.
+/// [`direction_to_equirect`] and `1 / sin θ` at `d` (any non-zero length), read
+/// off the direction as `|d| / √(x² + y²)` rather than recomputed from `v`: no
+/// trigonometry, full relative precision next to the poles (+∞ on them), and as a
+/// reciprocal it is ready long before the angles are, so that a pdf divided by the
+/// Jacobian becomes a multiplication at the end of the query's critical path.
 #[inline(always)]
-pub fn direction_to_equirect_and_sin(d: Vec3) -> ([f32; 2], f32) {
+pub fn direction_to_equirect_and_csc(d: Vec3) -> ([f32; 2], f32) {
+    use std::f64::consts::PI;
     let r2 = d.x * d.x + d.y * d.y;
     let r = r2.sqrt();
-    let theta = atan2_fast(r, d.z);
-    let mut phi = atan2_fast(d.y, d.x);
-    if phi < 0.0 {
-        phi += 2.0 * PI;
-    }
-    let u = (phi * (0.5 / PI)).min(ONE_MINUS_EPSILON);
-    let sin_theta = r / (r2 + d.z * d.z).sqrt();
-    ([u, theta * (1.0 / PI)], sin_theta)
+    // Both angles at once, in f64, each rounded once into the image coordinate.
+    let [theta, phi] = atan2_pair([r, d.y], [d.z, d.x]);
+    let phi = if phi < 0.0 { phi + 2.0 * PI } else { phi };
+    let u = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
+    let csc_theta = (r2 + d.z * d.z).sqrt() / r;
+    ([u, (theta * (1.0 / PI)) as f32], csc_theta)
 }
 
 #[cfg(test)]

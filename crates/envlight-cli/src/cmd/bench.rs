@@ -93,7 +93,10 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
 
     let n = args.queries;
     let xi: Vec<[f32; 2]> = (0..n).map(|k| envlight::rng::xi_2d(0xbe7c, k)).collect();
-    let dirs: Vec<Vec3> = xi.iter().map(|&x| uniform_sphere(x)).collect();
+    let dirs: Vec<Vec3> = xi
+        .iter()
+        .map(|&x| envlight::math::uniform_sphere(x))
+        .collect();
 
     let per_call_ns = |f: &dyn Fn() -> f32| {
         let started = Instant::now();
@@ -198,12 +201,4 @@ fn memory_floor(texels: &[[f32; 3]]) -> Vec<f32> {
             }
         });
     out
-}
-
-/// A uniformly distributed direction on the sphere for `ξ ∈ [0, 1)²`.
-fn uniform_sphere(xi: [f32; 2]) -> Vec3 {
-    let z = 1.0 - 2.0 * xi[0];
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = 2.0 * std::f32::consts::PI * xi[1];
-    Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }

@@ -102,6 +102,31 @@ impl Baseline2D {
     }
 }
 
+/// Bilinear lookup between texel centres, u periodic and v clamped, written the
+/// plain way (floor, wrap each index, four bounds-checked texel reads). The baseline
+/// has its own rather than the library's, so that optimising the library's lookup
+/// cannot speed up the yardstick it is measured against.
+fn lookup_bilinear(image: &EnvImage, u: f32, v: f32) -> [f32; 3] {
+    let (w, h) = (image.width() as i64, image.height() as i64);
+    let (s, t) = (u * w as f32 - 0.5, v * h as f32 - 0.5);
+    let (s0, t0) = (s.floor(), t.floor());
+    let (ds, dt) = (s - s0, t - t0);
+    let texel = |i: i64, j: i64| image.texel(i.rem_euclid(w) as usize, j.clamp(0, h - 1) as usize);
+    let (i, j) = (s0 as i64, t0 as i64);
+    let (a, b, c, d) = (
+        texel(i, j),
+        texel(i + 1, j),
+        texel(i, j + 1),
+        texel(i + 1, j + 1),
+    );
+    let mut out = [0.0f32; 3];
+    for k in 0..3 {
+        out[k] =
+            (1.0 - dt) * ((1.0 - ds) * a[k] + ds * b[k]) + dt * ((1.0 - ds) * c[k] + ds * d[k]);
+    }
+    out
+}
+
 pub struct BaselineLight {
     image: EnvImage,
     dist: Baseline2D,
@@ -117,7 +142,7 @@ impl BaselineLight {
             let sin_theta = (PI * vp).sin();
             for u in 0..w {
                 let up = (u as f32 + 0.5) / w as f32;
-                img[v * w + u] = luminance(image.lookup_bilinear(up, vp)) * sin_theta;
+                img[v * w + u] = luminance(lookup_bilinear(&image, up, vp)) * sin_theta;
             }
         }
         let dist = Baseline2D::new(&img, w, h);
@@ -151,7 +176,7 @@ impl BaselineLight {
         }
         let dir = Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta);
         let pdf = map_pdf / (2.0 * PI * PI * sin_theta);
-        Some((dir, pdf, self.image.lookup_bilinear(uv[0], uv[1])))
+        Some((dir, pdf, lookup_bilinear(&self.image, uv[0], uv[1])))
     }
 
     pub fn pdf(&self, d: Vec3) -> f32 {
@@ -173,6 +198,6 @@ impl BaselineLight {
         if phi < 0.0 {
             phi += 2.0 * PI;
         }
-        self.image.lookup_bilinear(phi / (2.0 * PI), theta / PI)
+        lookup_bilinear(&self.image, phi / (2.0 * PI), theta / PI)
     }
 }

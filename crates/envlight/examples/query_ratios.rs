@@ -1,0 +1,128 @@
+//! Per-query cost of `sample`, `pdf` and `radiance` against the plain baseline of
+//! the benches, interleaved: each round times the baseline and then envlight on the
+//! same 4096 queries (warm caches), and the figures are the minimum and the median
+//! over the rounds. Interleaving puts both under the same machine noise, and the
+//! minimum is what the code costs when nothing else interferes, so the ratios hold
+//! on a busy machine where criterion's separate runs drift by ±20%.
+//!
+//! `cargo run --release --example query_ratios -- [WIDTH] [ROUNDS]` (the built-in
+//! sky, WIDTH × WIDTH/2, 4096 by default; 300 rounds).
+
+#[allow(dead_code)] // the benches use more of the baseline than this does
+#[path = "../benches/baseline/mod.rs"]
+mod baseline;
+
+use baseline::BaselineLight;
+use envlight::{builtin, EnvironmentLight, LightOptions, Lookup, Vec3};
+use std::hint::black_box;
+use std::time::Instant;
+
+const QUERIES: usize = 4096;
+
+/// One timed pass over the queries, returning a checksum.
+type Run<'a> = Box<dyn Fn() -> f32 + 'a>;
+
+/// Every output of each sample folded into one number, so none can be skipped.
+fn fold(d: Vec3, pdf: f32, l: [f32; 3]) -> f32 {
+    pdf + d.x + d.y + d.z + l[0] + l[1] + l[2]
+}
+
+fn samples<'a>(light: &'a EnvironmentLight, xi: &'a [[f32; 2]]) -> Run<'a> {
+    Box::new(move || {
+        xi.iter()
+            .map(|&x| {
+                light
+                    .sample(black_box(x))
+                    .map_or(0.0, |s| fold(s.direction, s.pdf, s.radiance))
+            })
+            .sum()
+    })
+}
+
+fn radiance<'a>(light: &'a EnvironmentLight, dirs: &'a [Vec3]) -> Run<'a> {
+    Box::new(move || dirs.iter().map(|&d| light.radiance(black_box(d))[1]).sum())
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let width: usize = args.next().and_then(|s| s.parse().ok()).unwrap_or(4096);
+    let rounds: usize = args.next().and_then(|s| s.parse().ok()).unwrap_or(300);
+    let sky = builtin::sky(width, width / 2);
+    let base = BaselineLight::new(sky.clone());
+    let light = |lookup| {
+        let options = LightOptions {
+            lookup,
+            ..Default::default()
+        };
+        EnvironmentLight::new(sky.clone(), options).expect("the built-in sky builds")
+    };
+    let (bilinear, nearest) = (light(Lookup::Bilinear), light(Lookup::Nearest));
+    let xi: Vec<[f32; 2]> = (0..QUERIES as u64)
+        .map(|k| envlight::rng::xi_2d(99, k))
+        .collect();
+    let dirs: Vec<Vec3> = xi
+        .iter()
+        .map(|&x| envlight::math::uniform_sphere(x))
+        .collect();
+
+    println!(
+        "{width}x{} sky, {rounds} rounds of {QUERIES} warm queries; ns per query",
+        width / 2
+    );
+    println!(
+        "{:<28} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "query", "min", "median", "base min", "base med", "ratio"
+    );
+    let base_samples = || -> Run {
+        Box::new(|| {
+            xi.iter()
+                .map(|&x| {
+                    base.sample(black_box(x))
+                        .map_or(0.0, |(d, p, l)| fold(d, p, l))
+                })
+                .sum()
+        })
+    };
+    let base_radiance =
+        || -> Run { Box::new(|| dirs.iter().map(|&d| base.radiance(black_box(d))[1]).sum()) };
+    let cases: Vec<(&str, Run, Run)> = vec![
+        ("sample (bilinear)", base_samples(), samples(&bilinear, &xi)),
+        ("sample (nearest)", base_samples(), samples(&nearest, &xi)),
+        (
+            "pdf",
+            Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()),
+            Box::new(|| dirs.iter().map(|&d| bilinear.pdf(black_box(d))).sum()),
+        ),
+        (
+            "radiance (bilinear)",
+            base_radiance(),
+            radiance(&bilinear, &dirs),
+        ),
+        (
+            "radiance (nearest)",
+            base_radiance(),
+            radiance(&nearest, &dirs),
+        ),
+    ];
+    for (name, run_base, run_ours) in &cases {
+        let time = |run: &Run| {
+            let started = Instant::now();
+            black_box(run());
+            started.elapsed().as_secs_f64() * 1e9 / QUERIES as f64
+        };
+        let (mut ours, mut theirs) = (Vec::new(), Vec::new());
+        for _ in 0..rounds {
+            theirs.push(time(run_base));
+            ours.push(time(run_ours));
+        }
+        let stats = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            (v[0], v[v.len() / 2])
+        };
+        let ((min, med), (bmin, bmed)) = (stats(&mut ours), stats(&mut theirs));
+        println!(
+            "{name:<28} {min:>8.1} {med:>8.1} {bmin:>8.1} {bmed:>8.1} {:>7.2}x",
+            bmed / med
+        );
+    }
+}
