@@ -384,7 +384,9 @@ impl Distribution1D {
         GuidedCdf {
             cdf: &self.cdf,
             guide: &self.guide,
-            shift: 32 - guide_bits(self.len()),
+            // The guide's length is a power of two: its log is one instruction,
+            // where `guide_bits` takes six.
+            shift: 32 - self.guide.len().trailing_zeros(),
         }
     }
 
@@ -484,6 +486,8 @@ pub struct Distribution2D {
     marginal: Distribution1D,
     /// `nu nv / CDF_ONE²`, or 0 for a zero function: pdf = width_u · width_v · this.
     pdf_scale: f64,
+    /// `guide_bits(nu)`: each row's guide table has `1 << row_guide_bits` entries.
+    row_guide_bits: u32,
     /// `1 / nu` in f32, for the sampling hint's cell centres (which need not be
     /// exact, and should not spend a division).
     inv_nu: f32,
@@ -569,6 +573,7 @@ impl Distribution2D {
                 conditional_guide,
                 marginal,
                 pdf_scale,
+                row_guide_bits: guide_bits(nu),
                 inv_nu: 1.0 / nu as f32,
             },
             results,
@@ -613,7 +618,7 @@ impl Distribution2D {
 
     #[inline(always)]
     fn row(&self, v: usize) -> GuidedCdf<'_> {
-        let bits = guide_bits(self.nu);
+        let bits = self.row_guide_bits;
         let len = 1usize << bits;
         GuidedCdf {
             cdf: self.row_cdf(v),
