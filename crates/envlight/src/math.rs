@@ -452,15 +452,20 @@ mod tests {
                 cases.push((y, x));
             }
         }
-        for pair in cases.chunks_exact(2) {
-            let [(y0, x0), (y1, x1)] = [pair[0], pair[1]];
-            let got = atan2_pair([y0, y1], [x0, x1]);
-            for (g, (y, x)) in got.into_iter().zip([(y0, x0), (y1, x1)]) {
-                let want = atan2_f64(y, x);
-                assert!(
-                    g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
-                    "atan2({y}, {x}): {g} vs {want}"
-                );
+        // Every case in both lanes, beside its neighbour in the list (an odd count
+        // of cases would leave one out of a plain pairing).
+        for (k, &(y0, x0)) in cases.iter().enumerate() {
+            let (y1, x1) = cases[(k + 1) % cases.len()];
+            for (ys, xs) in [([y0, y1], [x0, x1]), ([y1, y0], [x1, x0])] {
+                let got = atan2_pair(ys, xs);
+                for lane in 0..2 {
+                    let (y, x) = (ys[lane], xs[lane]);
+                    let (g, want) = (got[lane], atan2_f64(y, x));
+                    assert!(
+                        g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
+                        "atan2({y}, {x}): {g} vs {want}"
+                    );
+                }
             }
         }
     }
