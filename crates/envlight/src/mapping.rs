@@ -56,6 +56,43 @@ pub fn direction_to_equirect_and_csc(d: Vec3) -> ([f32; 2], f32) {
     ([u, (theta * (1.0 / PI)) as f32], csc_theta)
 }
 
+/// [`direction_to_equirect_and_csc`] for `N` directions given by their
+/// coordinates (`x[i], y[i], z[i]`), as loops over the lanes that the compiler
+/// vectorizes: the same operations in the same order, so bit for bit the same
+/// values.
+#[inline(always)]
+pub(crate) fn directions_to_equirect_and_csc<const N: usize>(
+    x: &[f32; N],
+    y: &[f32; N],
+    z: &[f32; N],
+) -> ([[f32; 2]; N], [f32; N]) {
+    use std::f64::consts::PI;
+    let mut r = [0.0f32; N];
+    let mut csc = [0.0f32; N];
+    for i in 0..N {
+        let r2 = x[i] * x[i] + y[i] * y[i];
+        r[i] = r2.sqrt();
+        csc[i] = (r2 + z[i] * z[i]).sqrt() / r[i];
+    }
+    let (mut r64, mut z64, mut y64, mut x64) = ([0.0f64; N], [0.0f64; N], [0.0f64; N], [0.0f64; N]);
+    for i in 0..N {
+        (r64[i], z64[i], y64[i], x64[i]) = (r[i] as f64, z[i] as f64, y[i] as f64, x[i] as f64);
+    }
+    let theta = crate::math::atan2_lanes(&r64, &z64);
+    let phi = crate::math::atan2_lanes(&y64, &x64);
+    let mut uv = [[0.0f32; 2]; N];
+    for i in 0..N {
+        let phi = if phi[i] < 0.0 {
+            phi[i] + 2.0 * PI
+        } else {
+            phi[i]
+        };
+        let u = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
+        uv[i] = [u, (theta[i] * (1.0 / PI)) as f32];
+    }
+    (uv, csc)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -269,6 +269,44 @@ fn atan2_pair_sse2(y: [f32; 2], x: [f32; 2]) -> [f64; 2] {
     out
 }
 
+/// [`atan2_f64`] on each of `N` lanes, written as straight-line code with
+/// selects where the scalar version branches, so that the compiler turns the loop
+/// into vector instructions (two f64 lanes per SSE2 register, four per AVX one):
+/// the angle stage of the batch queries. The same operations in the same order as
+/// [`atan2_pair`], so bit for bit its values.
+#[inline(always)]
+pub(crate) fn atan2_lanes<const N: usize>(y: &[f64; N], x: &[f64; N]) -> [f64; N] {
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+    let mut out = [0.0f64; N];
+    for i in 0..N {
+        let (x, y) = (x[i], y[i]);
+        let (ax, ay) = (x.abs(), y.abs());
+        let swapped = ay > ax;
+        let num = if swapped { ax } else { ay };
+        let den = if swapped { ay } else { ax };
+        let big = num > TAN_PI_8 * den;
+        let top = if big { num - den } else { num };
+        let bottom = if big { num + den } else { den };
+        // As in `atan2_pair`: x = y = 0 divides 0 by the smallest normal (giving 0),
+        // and a NaN denominator stays NaN (the comparison is false).
+        let bottom = if f64::MIN_POSITIVE > bottom {
+            f64::MIN_POSITIVE
+        } else {
+            bottom
+        };
+        let arg = top / bottom;
+        let s = arg * arg;
+        let (p, s2) = (&ATAN_P, s * s);
+        let poly = (p[0] + p[1] * s) + s2 * ((p[2] + p[3] * s) + s2 * (p[4] + p[5] * s));
+        let offset = if big { FRAC_PI_4 } else { 0.0 };
+        let a = offset + arg * poly;
+        let a = if swapped { FRAC_PI_2 - a } else { a };
+        let a = if x < 0.0 { PI - a } else { a };
+        out[i] = if y < 0.0 { -a } else { a };
+    }
+    out
+}
+
 /// A uniformly distributed unit direction for `ξ ∈ [0, 1)²`: `z = 1 - 2ξ₀`,
 /// `φ = 2πξ₁` (density `1 / 4π` per steradian).
 #[inline]
@@ -437,7 +475,7 @@ mod tests {
     }
 
     #[test]
-    fn atan2_pair_is_bit_identical_to_the_scalar_version() {
+    fn atan2_pair_and_lanes_are_bit_identical_to_the_scalar_version() {
         let mut rng = crate::rng::SplitMix64::new(17);
         let mut cases: Vec<(f32, f32)> = (0..100_000)
             .map(|k| {
@@ -466,6 +504,17 @@ mod tests {
                         "atan2({y}, {x}): {g} vs {want}"
                     );
                 }
+            }
+            // The lanes version: each case in every one of four lanes (as lane j of
+            // the window that starts j cases earlier).
+            let window: [(f32, f32); 4] = std::array::from_fn(|j| cases[(k + j) % cases.len()]);
+            let got = atan2_lanes(&window.map(|c| c.0 as f64), &window.map(|c| c.1 as f64));
+            for (&(y, x), g) in window.iter().zip(got) {
+                let want = atan2_f64(y, x);
+                assert!(
+                    g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
+                    "atan2_lanes({y}, {x}): {g} vs {want}"
+                );
             }
         }
     }

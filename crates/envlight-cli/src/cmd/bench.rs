@@ -22,6 +22,7 @@ use crate::output::Output;
 texel), sample_ns / pdf_ns / radiance_ns (mean per call on one thread, random ξ or \
 uniformly random directions), batch_samples_per_s (the batch API on all threads) and \
 bytes_per_texel (sampling data per texel of the light's image, the image itself aside). \
+The readable table also gives the batch pdf and radiance per direction on one thread. \
 Builds start from the map as read, with the light options given (for --mapping \
 equal-area from a lat-long map, the resampling is part of build_ms).\n\n\
 With --json, one object with exactly the keys width, height (of the map as read), threads, load_ms, \
@@ -119,6 +120,21 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             per_call_ns(&|| dirs.iter().map(|&d| light.radiance(d)[1]).sum()),
         )
     });
+    // The batch queries on one thread: per-direction cost of the block kernels,
+    // comparable with the single calls above.
+    let (pdf_batch_ns, radiance_batch_ns) = one_thread.install(|| {
+        let mut pdfs = vec![0.0f32; dirs.len()];
+        let started = Instant::now();
+        light.pdf_batch(&dirs, &mut pdfs);
+        let pdf_ns = started.elapsed().as_secs_f64() * 1e9 / n as f64;
+        black_box(&pdfs);
+        let mut radiance = vec![[0.0f32; 3]; dirs.len()];
+        let started = Instant::now();
+        light.radiance_batch(&dirs, &mut radiance);
+        let radiance_ns = started.elapsed().as_secs_f64() * 1e9 / n as f64;
+        black_box(&radiance);
+        (pdf_ns, radiance_ns)
+    });
     let mut out_samples = vec![None; xi.len()];
     let started = Instant::now();
     light.sample_batch(&xi, &mut out_samples);
@@ -168,6 +184,8 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
              sample            {sample_ns:>10.1} ns   (1 thread)\n\
              pdf               {pdf_ns:>10.1} ns   (1 thread)\n\
              radiance          {radiance_ns:>10.1} ns   (1 thread)\n\
+             pdf, batch        {pdf_batch_ns:>10.1} ns   (per direction, 1 thread)\n\
+             radiance, batch   {radiance_batch_ns:>10.1} ns   (per direction, 1 thread)\n\
              batch sample      {:>10.2} M/s  (all threads)\n\
              sampling data     {bytes_per_texel:>10.2} bytes per texel\n",
             loaded.name,
