@@ -5,6 +5,9 @@
 //! minimum is what the code costs when nothing else interferes, so the ratios hold
 //! on a busy machine where criterion's separate runs drift by ±20%.
 //!
+//! The batch rows time `pdf_batch` / `radiance_batch` on one thread against the
+//! baseline's one-at-a-time queries.
+//!
 //! `cargo run --release --example query_ratios -- [WIDTH] [ROUNDS]` (the built-in
 //! sky, WIDTH × WIDTH/2, 4096 by default; 300 rounds).
 
@@ -20,7 +23,7 @@ use std::time::Instant;
 const QUERIES: usize = 4096;
 
 /// One timed pass over the queries, returning a checksum.
-type Run<'a> = Box<dyn Fn() -> f32 + 'a>;
+type Run<'a> = Box<dyn Fn() -> f32 + Sync + 'a>;
 
 /// Every output of each sample folded into one number, so none can be skipped.
 fn fold(d: Vec3, pdf: f32, l: [f32; 3]) -> f32 {
@@ -103,8 +106,46 @@ fn main() {
             base_radiance(),
             radiance(&nearest, &dirs),
         ),
+        (
+            "pdf, batch",
+            Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()),
+            Box::new(|| {
+                let mut out = vec![0.0f32; dirs.len()];
+                bilinear.pdf_batch(black_box(&dirs), &mut out);
+                out.iter().sum()
+            }),
+        ),
+        (
+            "radiance, batch (bilinear)",
+            base_radiance(),
+            radiance_batch(&bilinear, &dirs),
+        ),
+        (
+            "radiance, batch (nearest)",
+            base_radiance(),
+            radiance_batch(&nearest, &dirs),
+        ),
     ];
-    for (name, run_base, run_ours) in &cases {
+    // Everything on one worker thread, where the batch calls run their one chunk
+    // in place (from outside the pool they would pay a hand-over each).
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a one-thread pool");
+    one_thread.install(|| report(&cases, rounds));
+}
+
+fn radiance_batch<'a>(light: &'a EnvironmentLight, dirs: &'a [Vec3]) -> Run<'a> {
+    Box::new(move || {
+        let mut out = vec![[0.0f32; 3]; dirs.len()];
+        light.radiance_batch(black_box(dirs), &mut out);
+        out.iter().map(|l| l[1]).sum()
+    })
+}
+
+/// Times every case, interleaved with its baseline, and prints the table.
+fn report(cases: &[(&str, Run, Run)], rounds: usize) {
+    for (name, run_base, run_ours) in cases {
         let time = |run: &Run| {
             let started = Instant::now();
             black_box(run());

@@ -165,6 +165,14 @@ impl AliasTable2D {
         self.index_pdf(iv * self.nu + iu)
     }
 
+    /// Starts fetching the value [`Self::cell_pdf`] of cell `[iu, iv]` will read.
+    /// A hint: any cell, even outside the grid, is harmless.
+    #[inline(always)]
+    pub(crate) fn prefetch_cell(&self, iu: usize, iv: usize) {
+        let at = iv.wrapping_mul(self.nu).wrapping_add(iu);
+        crate::math::prefetch_ptr(self.func.as_ptr().wrapping_add(at));
+    }
+
     #[inline(always)]
     fn index_pdf(&self, index: usize) -> f32 {
         self.value_pdf(self.func[index])

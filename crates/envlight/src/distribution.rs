@@ -36,7 +36,7 @@
 //! flat arrays (no per-row allocation), plus a marginal distribution over the rows'
 //! integrals. Memory per cell: 4 bytes of CDF plus 1 to 2 bytes of guide table.
 
-use crate::math::{floor_index, len_f32, len_f64, prefetch_read};
+use crate::math::{floor_index, len_f32, len_f64, prefetch_ptr, prefetch_read};
 
 /// The most samples [`Distribution2D::sample_block`] takes at once.
 pub const STAGED_BLOCK: usize = 32;
@@ -185,6 +185,27 @@ impl GuidedCdf<'_> {
 #[inline(always)]
 pub(crate) fn cell_index(x: f32, n: usize) -> usize {
     floor_index(x * len_f32(n), n)
+}
+
+/// [`cell_index`] of `N` coordinates at once, as a loop the compiler vectorizes;
+/// bit for bit the same cells for any grid of fewer than 2³¹ cells (clamping to
+/// the last cell before or after truncation gives the same integer).
+#[inline(always)]
+pub(crate) fn cell_indices<const N: usize>(x: &[f32; N], n: usize) -> [u32; N] {
+    let last = (n - 1).min(i32::MAX as usize) as i32;
+    let scale = len_f32(n);
+    let mut out = [0u32; N];
+    for (o, &x) in out.iter_mut().zip(x) {
+        // `max` maps NaN to 0, as in `floor_index`; the bound is the largest f32
+        // below 2³¹.
+        #[allow(clippy::manual_clamp)]
+        let y = (x * scale).max(0.0).min(2_147_483_520.0);
+        // SAFETY: y is finite and in [0, 2³¹), where truncation to i32 is defined
+        // (and, for y >= 0, is the floor).
+        let i = unsafe { y.to_int_unchecked::<i32>() };
+        *o = i.min(last) as u32;
+    }
+    out
 }
 
 /// The point `(cell + frac) / n` for an offset `frac ∈ [0, 1)`, computed in `f64`,
@@ -629,13 +650,43 @@ impl Distribution2D {
 
     /// Density of cell `[iu, iv]`: `nu nv · width_v(iv) · width_u(iu | iv) /
     /// CDF_ONE²`, 0 for a zero function.
+    ///
+    /// # Panics
+    /// When the cell is outside the grid.
     #[inline(always)]
     pub fn cell_pdf(&self, iu: usize, iv: usize) -> f32 {
-        let wv = self.marginal.view().width(iv);
+        assert!(iu < self.nu && iv < self.nv, "cell outside the grid");
+        self.cell_pdf_in_grid(iu, iv)
+    }
+
+    /// Starts fetching what [`Self::cell_pdf`] of cell `[iu, iv]` will read (the
+    /// row's CDF entries; the marginal is small and stays cached). A hint: any
+    /// cell, even outside the grid, is harmless.
+    #[inline(always)]
+    pub(crate) fn prefetch_cell(&self, iu: usize, iv: usize) {
+        let at = iv.wrapping_mul(self.nu + 1).wrapping_add(iu);
+        prefetch_ptr(self.conditional_cdf.as_ptr().wrapping_add(at));
+    }
+
+    /// [`Self::cell_pdf`] of a cell known to be in the grid (`iu < nu`, `iv < nv`,
+    /// as [`cell_index`] guarantees), without bounds checks: the hot lookups pay
+    /// for four of them otherwise, which the compiler cannot prove redundant.
+    #[inline(always)]
+    pub(crate) fn cell_pdf_in_grid(&self, iu: usize, iv: usize) -> f32 {
+        debug_assert!(iu < self.nu && iv < self.nv);
+        let marginal = &self.marginal.cdf;
         // The row's CDF entries directly: building the row's view would also
         // slice (and bounds-check) its guide table, which a lookup never reads.
         let at = iv * (self.nu + 1) + iu;
-        let wu = self.conditional_cdf[at + 1] - self.conditional_cdf[at];
+        let cdf = &self.conditional_cdf;
+        // SAFETY: the marginal CDF has nv + 1 entries and the conditional CDFs
+        // nv (nu + 1), so for iu < nu and iv < nv all four indices are in range.
+        let (wu, wv) = unsafe {
+            (
+                cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
+                marginal.get_unchecked(iv + 1) - marginal.get_unchecked(iv),
+            )
+        };
         self.pdf_of_widths(wu, wv)
     }
 
@@ -647,7 +698,7 @@ impl Distribution2D {
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
     #[inline(always)]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
+        self.cell_pdf_in_grid(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`

@@ -22,7 +22,7 @@
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
-use crate::distribution::{for_each_row, Distribution2D, Sample2D, STAGED_BLOCK};
+use crate::distribution::{cell_indices, for_each_row, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
@@ -604,44 +604,99 @@ impl EnvironmentLight {
         self.pdf_chunk(dirs, out)
     }
 
-    /// [`Self::pdf_batch`] on one chunk, on the current thread.
+    /// [`Self::pdf_batch`] on one chunk, on the current thread. For the
+    /// piecewise-constant samplers the cells of a block are found together too
+    /// ([`cell_indices`]) and fetched a block ahead; the bilinear density reads
+    /// its patches one at a time.
     #[inline(always)]
     fn pdf_chunk(&self, dirs: &[Vec3], out: &mut [f32]) {
         match &self.planar {
-            Planar::Inversion(d) => self.pdf_blocks(dirs, out, |uv| d.pdf(uv)),
-            Planar::Alias(d) => self.pdf_blocks(dirs, out, |uv| d.pdf(uv)),
-            Planar::Hierarchical(d) => self.pdf_blocks(dirs, out, |uv| d.pdf(uv)),
-            Planar::Bilinear(d) => self.pdf_blocks(dirs, out, |uv| d.pdf(uv)),
+            Planar::Inversion(d) => self.pdf_cells(
+                dirs,
+                out,
+                [d.nu(), d.nv()],
+                |iu, iv| d.prefetch_cell(iu, iv),
+                |iu, iv| d.cell_pdf_in_grid(iu, iv),
+            ),
+            Planar::Alias(d) => self.pdf_cells(
+                dirs,
+                out,
+                [d.nu(), d.nv()],
+                |iu, iv| d.prefetch_cell(iu, iv),
+                |iu, iv| d.cell_pdf(iu, iv),
+            ),
+            Planar::Hierarchical(d) => self.pdf_cells(
+                dirs,
+                out,
+                [d.nu(), d.nv()],
+                |_, _| {},
+                |iu, iv| d.cell_pdf(iu, iv),
+            ),
+            Planar::Bilinear(d) => self.uv_blocks(
+                dirs,
+                out,
+                |block| *block,
+                #[inline(always)]
+                |block, out| {
+                    for (i, o) in out.iter_mut().enumerate() {
+                        let uv = [block.u[i], block.v[i]];
+                        *o = solid_angle(d.pdf(uv), block.inv_jacobian[i]);
+                    }
+                },
+            ),
         }
     }
 
-    /// The pdf stage of [`Self::pdf_batch`] on one chunk: the planar density at each
-    /// image point of [`Self::uv_blocks`], over the Jacobian.
+    /// The pdf stage of [`Self::pdf_batch`] for a piecewise-constant density over
+    /// a `grid[0] × grid[1]` grid of cells: `cell_pdf` of the cell at each image
+    /// point of [`Self::uv_blocks`], over the Jacobian. `prefetch` asks for a cell's
+    /// data a block before `cell_pdf` reads it.
     #[inline(always)]
-    fn pdf_blocks(&self, dirs: &[Vec3], out: &mut [f32], planar_pdf: impl Fn([f32; 2]) -> f32) {
+    fn pdf_cells(
+        &self,
+        dirs: &[Vec3],
+        out: &mut [f32],
+        [nu, nv]: [usize; 2],
+        prefetch: impl Fn(usize, usize),
+        cell_pdf: impl Fn(usize, usize) -> f32,
+    ) {
         self.uv_blocks(
             dirs,
             out,
             #[inline(always)]
-            |uv, inv_jacobian, out| {
-                for ((o, &uv), &inv_jacobian) in out.iter_mut().zip(uv).zip(inv_jacobian) {
-                    *o = solid_angle(planar_pdf(uv), inv_jacobian);
+            |block| {
+                let (iu, iv) = (cell_indices(&block.u, nu), cell_indices(&block.v, nv));
+                for (&iu, &iv) in iu.iter().zip(&iv) {
+                    prefetch(iu as usize, iv as usize);
+                }
+                (iu, iv, block.inv_jacobian)
+            },
+            #[inline(always)]
+            |(iu, iv, inv_jacobian), out| {
+                for (i, o) in out.iter_mut().enumerate() {
+                    let planar = cell_pdf(iu[i] as usize, iv[i] as usize);
+                    *o = solid_angle(planar, inv_jacobian[i]);
                 }
             },
         );
     }
 
-    /// Cuts `dirs` into blocks of [`QUERY_BLOCK`] directions, computes each block's
-    /// image points and reciprocal Jacobians together ([`Self::to_uv_block`]), and
-    /// hands them to `finish` with the matching part of `out` (as long as the
-    /// block; the last block is padded, and `finish` sees only its real part).
+    /// Cuts `dirs` into blocks of [`QUERY_BLOCK`] directions and computes each
+    /// block's image points and reciprocal Jacobians together
+    /// ([`Self::to_uv_block`]). `prepare` then turns them into whatever `finish`
+    /// needs and starts fetching the memory it will read; `finish` writes the
+    /// results into the matching part of `out`, one block later: a block's cache
+    /// misses are under way while the next block's angles are computed. The last
+    /// block is padded; `out` is as long as the real part.
     #[inline(always)]
-    fn uv_blocks<O>(
+    fn uv_blocks<O, P>(
         &self,
         dirs: &[Vec3],
         out: &mut [O],
-        mut finish: impl FnMut(&[[f32; 2]], &[f32], &mut [O]),
+        prepare: impl Fn(&UvBlock) -> P,
+        mut finish: impl FnMut(P, &mut [O]),
     ) {
+        let mut pending: Option<(P, &mut [O])> = None;
         for (dirs, out) in dirs.chunks(QUERY_BLOCK).zip(out.chunks_mut(QUERY_BLOCK)) {
             // Coordinates in separate arrays, the layout vector instructions read.
             let (mut x, mut y, mut z) = (
@@ -652,9 +707,13 @@ impl EnvironmentLight {
             for (i, d) in dirs.iter().enumerate() {
                 (x[i], y[i], z[i]) = (d.x, d.y, d.z);
             }
-            let (uv, inv_jacobian) = self.to_uv_block(x, y, z);
-            let n = dirs.len();
-            finish(&uv[..n], &inv_jacobian[..n], out);
+            let prepared = prepare(&self.to_uv_block(x, y, z));
+            if let Some((previous, previous_out)) = pending.replace((prepared, out)) {
+                finish(previous, previous_out);
+            }
+        }
+        if let Some((last, last_out)) = pending {
+            finish(last, last_out);
         }
     }
 
@@ -670,7 +729,7 @@ impl EnvironmentLight {
         mut x: [f32; QUERY_BLOCK],
         mut y: [f32; QUERY_BLOCK],
         mut z: [f32; QUERY_BLOCK],
-    ) -> ([[f32; 2]; QUERY_BLOCK], [f32; QUERY_BLOCK]) {
+    ) -> UvBlock {
         if self.rotated {
             for i in 0..QUERY_BLOCK {
                 let d = self.world_to_light.apply(Vec3::new(x[i], y[i], z[i]));
@@ -679,18 +738,22 @@ impl EnvironmentLight {
         }
         match self.options.mapping {
             Mapping::Equirectangular => {
-                let (uv, mut inv_jacobian) = directions_to_equirect_and_csc(&x, &y, &z);
+                let (u, v, mut inv_jacobian) = directions_to_equirect_and_csc(&x, &y, &z);
                 for j in &mut inv_jacobian {
                     *j *= 1.0 / EQUIRECT_JACOBIAN;
                 }
-                (uv, inv_jacobian)
+                UvBlock { u, v, inv_jacobian }
             }
             Mapping::EqualArea => {
-                let mut uv = [[0.0f32; 2]; QUERY_BLOCK];
+                let (mut u, mut v) = ([0.0f32; QUERY_BLOCK], [0.0f32; QUERY_BLOCK]);
                 for i in 0..QUERY_BLOCK {
-                    uv[i] = equal_area::sphere_to_square(Vec3::new(x[i], y[i], z[i]));
+                    [u[i], v[i]] = equal_area::sphere_to_square(Vec3::new(x[i], y[i], z[i]));
                 }
-                (uv, [1.0 / EQUAL_AREA_JACOBIAN; QUERY_BLOCK])
+                UvBlock {
+                    u,
+                    v,
+                    inv_jacobian: [1.0 / EQUAL_AREA_JACOBIAN; QUERY_BLOCK],
+                }
             }
         }
     }
@@ -724,9 +787,16 @@ impl EnvironmentLight {
             dirs,
             out,
             #[inline(always)]
-            |uv, _, out| {
-                for (o, &uv) in out.iter_mut().zip(uv) {
-                    *o = self.lookup(uv);
+            |block| {
+                for (&u, &v) in block.u.iter().zip(&block.v) {
+                    self.image.prefetch(u, v);
+                }
+                *block
+            },
+            #[inline(always)]
+            |block, out| {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = self.lookup([block.u[i], block.v[i]]);
                 }
             },
         )
@@ -950,6 +1020,15 @@ impl EnvironmentLight {
 /// ([`EnvironmentLight::to_uv_block`]): enough for several vectors of the widest
 /// kind, few enough that the block's arrays stay in registers and L1.
 const QUERY_BLOCK: usize = 16;
+
+/// A block of directions' image points (`u`, `v`) and reciprocal Jacobians,
+/// lane by lane.
+#[derive(Clone, Copy)]
+struct UvBlock {
+    u: [f32; QUERY_BLOCK],
+    v: [f32; QUERY_BLOCK],
+    inv_jacobian: [f32; QUERY_BLOCK],
+}
 
 /// The solid-angle density from the planar one at a direction's image point and
 /// the reciprocal Jacobian there: 0 at a pole (infinite `1/J`), for a NaN from a

@@ -59,13 +59,13 @@ pub fn direction_to_equirect_and_csc(d: Vec3) -> ([f32; 2], f32) {
 /// [`direction_to_equirect_and_csc`] for `N` directions given by their
 /// coordinates (`x[i], y[i], z[i]`), as loops over the lanes that the compiler
 /// vectorizes: the same operations in the same order, so bit for bit the same
-/// values.
+/// values. Returns the `u`, `v` and `1 / sin θ` of each.
 #[inline(always)]
 pub(crate) fn directions_to_equirect_and_csc<const N: usize>(
     x: &[f32; N],
     y: &[f32; N],
     z: &[f32; N],
-) -> ([[f32; 2]; N], [f32; N]) {
+) -> ([f32; N], [f32; N], [f32; N]) {
     use std::f64::consts::PI;
     let mut r = [0.0f32; N];
     let mut csc = [0.0f32; N];
@@ -80,17 +80,17 @@ pub(crate) fn directions_to_equirect_and_csc<const N: usize>(
     }
     let theta = crate::math::atan2_lanes(&r64, &z64);
     let phi = crate::math::atan2_lanes(&y64, &x64);
-    let mut uv = [[0.0f32; 2]; N];
+    let (mut u, mut v) = ([0.0f32; N], [0.0f32; N]);
     for i in 0..N {
         let phi = if phi[i] < 0.0 {
             phi[i] + 2.0 * PI
         } else {
             phi[i]
         };
-        let u = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
-        uv[i] = [u, (theta[i] * (1.0 / PI)) as f32];
+        u[i] = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
+        v[i] = (theta[i] * (1.0 / PI)) as f32;
     }
-    (uv, csc)
+    (u, v, csc)
 }
 
 #[cfg(test)]
