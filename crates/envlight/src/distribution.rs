@@ -36,7 +36,7 @@
 //! flat arrays (no per-row allocation), plus a marginal distribution over the rows'
 //! integrals. Memory per cell: 4 bytes of CDF plus 1 to 2 bytes of guide table.
 
-use crate::math::{floor_index, len_f32, len_f64, prefetch_ptr, prefetch_read};
+use crate::math::{floor_index, floor_index_i32, len_f32, len_f64, prefetch_ptr, prefetch_read};
 
 /// The most samples [`Distribution2D::sample_block`] takes at once.
 pub const STAGED_BLOCK: usize = 32;
@@ -188,22 +188,15 @@ pub(crate) fn cell_index(x: f32, n: usize) -> usize {
 }
 
 /// [`cell_index`] of `N` coordinates at once, as a loop the compiler vectorizes;
-/// bit for bit the same cells for any grid of fewer than 2³¹ cells (clamping to
-/// the last cell before or after truncation gives the same integer).
+/// bit for bit the same cells for any grid of fewer than 2³¹ cells.
 #[inline(always)]
 pub(crate) fn cell_indices<const N: usize>(x: &[f32; N], n: usize) -> [u32; N] {
     let last = (n - 1).min(i32::MAX as usize) as i32;
     let scale = len_f32(n);
+    // A loop, not `array::map`, which the compiler may leave as a call.
     let mut out = [0u32; N];
     for (o, &x) in out.iter_mut().zip(x) {
-        // `max` maps NaN to 0, as in `floor_index`; the bound is the largest f32
-        // below 2³¹.
-        #[allow(clippy::manual_clamp)]
-        let y = (x * scale).max(0.0).min(2_147_483_520.0);
-        // SAFETY: y is finite and in [0, 2³¹), where truncation to i32 is defined
-        // (and, for y >= 0, is the floor).
-        let i = unsafe { y.to_int_unchecked::<i32>() };
-        *o = i.min(last) as u32;
+        *o = floor_index_i32(x * scale, last) as u32;
     }
     out
 }

@@ -4,7 +4,7 @@
 //! Decoding files lives in [`crate::load`]; this module only holds and reads texels.
 
 use crate::error::{Error, Result, TexelPos};
-use crate::math::{floor_index, len_f32, prefetch_ptr};
+use crate::math::{floor_f32, floor_index, floor_index_i32, len_f32, prefetch_ptr};
 
 /// How radiance between texel centres is reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -279,19 +279,158 @@ impl EnvImage {
             let texel = |x: usize, y: usize| *self.texels.get_unchecked(y * w + x);
             (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1))
         };
-        // The four weights are ready before the texels arrive, so a lookup ends
-        // with one multiplication and two additions after its loads (nested lerps
-        // would chain six operations there). Non-negative weights of non-negative
-        // texels: the result needs no clamp.
-        let (gs, gt) = (1.0 - fs, 1.0 - ft);
-        let weights = [gs * gt, fs * gt, gs * ft, fs * ft];
-        let mut out = [0.0f32; 3];
-        for k in 0..3 {
-            out[k] =
-                (weights[0] * a[k] + weights[1] * b[k]) + (weights[2] * c[k] + weights[3] * d[k]);
-        }
-        out
+        blend([a, b, c, d], fs, ft)
     }
+}
+
+/// Where a block of `N` lookups reads: for lane `i`, texels `x0[i], x1[i]` of
+/// rows `y0[i], y1[i]`, blended with weights `1 - fs, fs` along u and
+/// `1 - ft, ft` along v (a nearest lookup reads `(x0, y0)` alone). Computed for
+/// all lanes at once by [`EnvImage::lookup_block`], in loops the compiler
+/// vectorizes; bit for bit what the one-point lookups compute.
+#[derive(Clone, Copy)]
+pub(crate) struct LookupBlock<const N: usize> {
+    mode: Lookup,
+    x0: [u32; N],
+    x1: [u32; N],
+    y0: [u32; N],
+    y1: [u32; N],
+    fs: [f32; N],
+    ft: [f32; N],
+}
+
+impl EnvImage {
+    /// The texels and weights of `N` lookups at `(u[i], v[i])` (see [`LookupBlock`]).
+    #[inline(always)]
+    pub(crate) fn lookup_block<const N: usize>(
+        &self,
+        u: &[f32; N],
+        v: &[f32; N],
+        mode: Lookup,
+        wrap: WrapU,
+    ) -> LookupBlock<N> {
+        let (w, h) = (self.width, self.height);
+        let (wf, hf) = (len_f32(w), len_f32(h));
+        // Image sides are far below 2³¹ (a texel count over 2³¹ is 24 GB).
+        let (w32, h32) = (w as i32, h as i32);
+        let mut b = LookupBlock {
+            mode,
+            x0: [0; N],
+            x1: [0; N],
+            y0: [0; N],
+            y1: [0; N],
+            fs: [0.0; N],
+            ft: [0.0; N],
+        };
+        for i in 0..N {
+            let (x0, x1, fs, y0, y1, ft) = match mode {
+                Lookup::Nearest => {
+                    let x = match wrap {
+                        WrapU::Periodic => floor_index_i32(periodic_lanes(u[i]) * wf, w32 - 1),
+                        WrapU::Clamp => floor_index_i32(u[i] * wf, w32 - 1),
+                    };
+                    let y = floor_index_i32(v[i] * hf, h32 - 1);
+                    (x, x, 0.0, y, y, 0.0)
+                }
+                Lookup::Bilinear => {
+                    let (x0, x1, fs) = match wrap {
+                        WrapU::Periodic => {
+                            // As in `bilinear`, with selects.
+                            let s = periodic_lanes(u[i]) * wf - 0.5 + wf;
+                            let k = floor_index_i32(s, 2 * w32 - 1);
+                            let x0 = if k >= w32 { k - w32 } else { k };
+                            let x1 = if x0 + 1 == w32 { 0 } else { x0 + 1 };
+                            (x0, x1, s - k as f32)
+                        }
+                        WrapU::Clamp => clamped_pair_i32(u[i], w32),
+                    };
+                    let (y0, y1, ft) = clamped_pair_i32(v[i], h32);
+                    (x0, x1, fs, y0, y1, ft)
+                }
+            };
+            (b.x0[i], b.x1[i], b.fs[i]) = (x0 as u32, x1 as u32, fs);
+            (b.y0[i], b.y1[i], b.ft[i]) = (y0 as u32, y1 as u32, ft);
+        }
+        b
+    }
+
+    /// Starts fetching the texels of every lookup in `b` (a hint).
+    #[inline(always)]
+    pub(crate) fn prefetch_block<const N: usize>(&self, b: &LookupBlock<N>) {
+        let w = self.width;
+        for i in 0..N {
+            let first = self
+                .texels
+                .as_ptr()
+                .wrapping_add(b.y0[i] as usize * w + b.x0[i] as usize);
+            prefetch_ptr(first);
+            if b.mode == Lookup::Bilinear {
+                let second = b.y1[i] as usize * w + b.x0[i] as usize;
+                prefetch_ptr(self.texels.as_ptr().wrapping_add(second));
+            }
+        }
+    }
+
+    /// The radiance of lookup `i` of `b`: bit for bit [`Self::lookup_wrapped`] at
+    /// its point.
+    #[inline(always)]
+    pub(crate) fn fetch<const N: usize>(&self, b: &LookupBlock<N>, i: usize) -> [f32; 3] {
+        let w = self.width;
+        let (x0, x1, y0, y1) = (
+            b.x0[i] as usize,
+            b.x1[i] as usize,
+            b.y0[i] as usize,
+            b.y1[i] as usize,
+        );
+        debug_assert!(x0 < w && x1 < w && y0 < self.height && y1 < self.height);
+        // SAFETY: `lookup_block` clamps every index into `[0, w - 1]` and
+        // `[0, h - 1]`, and the texels are `w h` long.
+        let texel = |x: usize, y: usize| unsafe { *self.texels.get_unchecked(y * w + x) };
+        match b.mode {
+            Lookup::Nearest => texel(x0, y0),
+            Lookup::Bilinear => {
+                let (a, bb, c, d) = (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1));
+                blend([a, bb, c, d], b.fs[i], b.ft[i])
+            }
+        }
+    }
+}
+
+/// The bilinear blend of the texels `[(x0, y0), (x1, y0), (x0, y1), (x1, y1)]`
+/// with weights `fs` along u and `ft` along v. The four weights are ready before
+/// the texels arrive, so a lookup ends with one multiplication and two additions
+/// after its loads (nested lerps would chain six operations there). Non-negative
+/// weights of non-negative texels: the result needs no clamp.
+#[inline(always)]
+fn blend([a, b, c, d]: [[f32; 3]; 4], fs: f32, ft: f32) -> [f32; 3] {
+    let (gs, gt) = (1.0 - fs, 1.0 - ft);
+    let weights = [gs * gt, fs * gt, gs * ft, fs * ft];
+    let mut out = [0.0f32; 3];
+    for k in 0..3 {
+        out[k] = (weights[0] * a[k] + weights[1] * b[k]) + (weights[2] * c[k] + weights[3] * d[k]);
+    }
+    out
+}
+
+/// [`periodic`] with selects and [`floor_f32`] (no branch, no library call), the
+/// same value.
+#[inline(always)]
+fn periodic_lanes(u: f32) -> f32 {
+    let r = u - floor_f32(u);
+    let r = if r < 1.0 { r } else { 0.0 };
+    if (0.0..1.0).contains(&u) {
+        u
+    } else {
+        r
+    }
+}
+
+/// [`clamped_pair`] in `i32` (see [`floor_index_i32`]), the same values.
+#[inline(always)]
+fn clamped_pair_i32(t: f32, n: i32) -> (i32, i32, f32) {
+    let s = t * n as f32 + 0.5;
+    let i = floor_index_i32(s, n);
+    ((i - 1).max(0), i.min(n - 1), s - i as f32)
 }
 
 /// `u` reduced into `[0, 1)` (for u outside it: the lookups' u is periodic).

@@ -788,15 +788,17 @@ impl EnvironmentLight {
             out,
             #[inline(always)]
             |block| {
-                for (&u, &v) in block.u.iter().zip(&block.v) {
-                    self.image.prefetch(u, v);
-                }
-                *block
+                let (mode, wrap) = (self.options.lookup, self.options.mapping.wrap());
+                let lookups = self.image.lookup_block(&block.u, &block.v, mode, wrap);
+                self.image.prefetch_block(&lookups);
+                lookups
             },
             #[inline(always)]
-            |block, out| {
+            |lookups, out| {
+                let s = self.options.scale;
                 for (i, o) in out.iter_mut().enumerate() {
-                    *o = self.lookup([block.u[i], block.v[i]]);
+                    let l = self.image.fetch(&lookups, i);
+                    *o = [l[0] * s, l[1] * s, l[2] * s];
                 }
             },
         )

@@ -20,6 +20,42 @@ pub(crate) fn floor_index(x: f32, n: usize) -> usize {
     (i as usize).min(n - 1)
 }
 
+/// [`floor_index`] for `n < 2³¹` as an `i32` (`last = n - 1`), in operations a
+/// loop over many of them turns into vector instructions (packed conversions
+/// to 32-bit integers exist; to 64-bit ones do not before AVX-512). The same
+/// value: clamping to the last index before or after truncation gives the same
+/// integer.
+#[inline(always)]
+pub(crate) fn floor_index_i32(x: f32, last: i32) -> i32 {
+    // `max` maps NaN to 0; the bound is the largest f32 below 2³¹.
+    #[allow(clippy::manual_clamp)]
+    let y = x.max(0.0).min(2_147_483_520.0);
+    // SAFETY: y is finite and in [0, 2³¹), where truncation to i32 is defined (and,
+    // for y >= 0, is the floor).
+    let i = unsafe { y.to_int_unchecked::<i32>() };
+    i.min(last)
+}
+
+/// `⌊x⌋` without a library call (f32::floor is one on the x86-64 baseline, which
+/// has no rounding instruction), in operations that vectorize: exactly
+/// `x.floor()` for every finite x and ±∞ (NaN gives NaN or a finite value; the
+/// callers discard it).
+#[inline(always)]
+pub(crate) fn floor_f32(x: f32) -> f32 {
+    // Above 2²³ in magnitude every f32 is an integer.
+    const BIG: f32 = 8_388_608.0;
+    #[allow(clippy::manual_clamp)]
+    let c = x.max(-BIG).min(BIG);
+    // SAFETY: c is finite (max maps NaN to -BIG) and within ±2²³.
+    let t = unsafe { c.to_int_unchecked::<i32>() } as f32;
+    let floor = if t > c { t - 1.0 } else { t };
+    if c.abs() < BIG {
+        floor
+    } else {
+        x
+    }
+}
+
 /// Asks the CPU to bring the cache line holding `r` closer (a no-op on other
 /// architectures).
 #[inline(always)]
