@@ -288,6 +288,10 @@ impl EnvImage {
 /// `1 - ft, ft` along v (a nearest lookup reads `(x0, y0)` alone). Computed for
 /// all lanes at once by [`EnvImage::lookup_block`], in loops the compiler
 /// vectorizes; bit for bit what the one-point lookups compute.
+///
+/// The one-point lookups keep their own code: routed through a block of one,
+/// with selects for their branches and no early exit for an in-range `u`, a
+/// single bilinear lookup measured 40% slower (and a light sample 15%).
 #[derive(Clone, Copy)]
 pub(crate) struct LookupBlock<const N: usize> {
     mode: Lookup,
