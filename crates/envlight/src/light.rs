@@ -587,19 +587,32 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
+        self.run_batch(directions, out, Self::pdf_chunk, Self::pdf_chunk_avx2);
+    }
+
+    /// Hands matching chunks of `directions` and `out` to `kernel`, in parallel,
+    /// or to `wide_kernel` (the same code compiled for AVX2) where the CPU has
+    /// AVX2 (see [`wide_vectors`]).
+    fn run_batch<O: Send>(
+        &self,
+        directions: &[Vec3],
+        out: &mut [O],
+        kernel: fn(&Self, &[Vec3], &mut [O]),
+        wide_kernel: unsafe fn(&Self, &[Vec3], &mut [O]),
+    ) {
+        let wide = wide_vectors();
         batch_chunks(directions, out, |dirs, out| {
-            #[cfg(target_arch = "x86_64")]
-            if wide_vectors() {
-                // SAFETY: the CPU supports AVX2.
-                return unsafe { self.pdf_chunk_avx2(dirs, out) };
+            if wide {
+                // SAFETY: the wide kernels need AVX2, which the CPU supports.
+                unsafe { wide_kernel(self, dirs, out) }
+            } else {
+                kernel(self, dirs, out)
             }
-            self.pdf_chunk(dirs, out)
         });
     }
 
     /// [`Self::pdf_chunk`] compiled for AVX2 (see [`wide_vectors`]).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     fn pdf_chunk_avx2(&self, dirs: &[Vec3], out: &mut [f32]) {
         self.pdf_chunk(dirs, out)
     }
@@ -763,19 +776,16 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
-        batch_chunks(directions, out, |dirs, out| {
-            #[cfg(target_arch = "x86_64")]
-            if wide_vectors() {
-                // SAFETY: the CPU supports AVX2.
-                return unsafe { self.radiance_chunk_avx2(dirs, out) };
-            }
-            self.radiance_chunk(dirs, out)
-        });
+        self.run_batch(
+            directions,
+            out,
+            Self::radiance_chunk,
+            Self::radiance_chunk_avx2,
+        );
     }
 
     /// [`Self::radiance_chunk`] compiled for AVX2 (see [`wide_vectors`]).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
     fn radiance_chunk_avx2(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
         self.radiance_chunk(dirs, out)
     }
@@ -1051,10 +1061,16 @@ fn solid_angle(planar_pdf: f32, inv_jacobian: f32) -> f32 {
 /// `#[inline(always)]` all the way down so that the wider instructions reach
 /// them. The results are the same either way: the kernels use no fused
 /// multiply-add, only operations that round alike at any vector width.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 fn wide_vectors() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 /// Hands matching chunks of `input` and `out` to `f`, in parallel.
@@ -1391,6 +1407,49 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The batch kernels as built for the baseline target (two f64 lanes), which
+    /// the public batch calls skip on a CPU with AVX2: bit for bit the single
+    /// queries too (tests/threads.rs covers the path the CPU picks).
+    #[test]
+    fn portable_batch_kernels_equal_single_queries() {
+        let image = crate::builtin::sky(96, 48);
+        let mut dirs: Vec<Vec3> = (0..1_001u64)
+            .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(5, k)))
+            .collect();
+        dirs.extend([
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, -1e-7, 0.0),
+            Vec3::new(f32::NAN, 0.0, 1.0),
+        ]);
+        for (sampler, lookup, mapping) in [
+            (Sampler::Inversion, Lookup::Bilinear, Mapping::Equirectangular),
+            (Sampler::Alias, Lookup::Nearest, Mapping::Equirectangular),
+            (Sampler::Hierarchical, Lookup::Bilinear, Mapping::EqualArea),
+        ] {
+            let options = LightOptions {
+                sampler,
+                lookup,
+                mapping,
+                rotation: Rotation::about_z_degrees(20.0),
+                ..Default::default()
+            };
+            let light = EnvironmentLight::new(image.clone(), options).unwrap();
+            let mut pdfs = vec![0.0; dirs.len()];
+            light.pdf_chunk(&dirs, &mut pdfs);
+            let mut radiance = vec![[0.0; 3]; dirs.len()];
+            light.radiance_chunk(&dirs, &mut radiance);
+            for (k, &d) in dirs.iter().enumerate() {
+                assert_eq!(pdfs[k].to_bits(), light.pdf(d).to_bits(), "{sampler:?} {d:?}");
+                assert_eq!(
+                    radiance[k].map(f32::to_bits),
+                    light.radiance(d).map(f32::to_bits),
+                    "{sampler:?} {d:?}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn row_solid_angles_sum_to_the_sphere() {
