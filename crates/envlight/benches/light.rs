@@ -232,6 +232,12 @@ fn bench_queries(c: &mut Criterion) {
             b.iter(|| dirs.iter().map(|&d| l.pdf(black_box(d))).sum::<f32>())
         });
     }
+    // The batch call on one thread (run from inside the pool, so its one chunk
+    // runs in place), per direction.
+    let mut pdfs = vec![0.0f32; dirs.len()];
+    group.bench_function("envlight-batch-1thread", |b| {
+        one_thread.install(|| b.iter(|| lights[0].1.pdf_batch(black_box(&dirs), &mut pdfs)))
+    });
     group.finish();
 
     let mut group = c.benchmark_group("radiance");
@@ -250,6 +256,12 @@ fn bench_queries(c: &mut Criterion) {
                     .map(|&d| l.radiance(black_box(d))[1])
                     .sum::<f32>()
             })
+        });
+    }
+    let mut radiance = vec![[0.0f32; 3]; dirs.len()];
+    for (name, l) in &lights {
+        group.bench_function(format!("{name}-batch-1thread"), |b| {
+            one_thread.install(|| b.iter(|| l.radiance_batch(black_box(&dirs), &mut radiance)))
         });
     }
     group.finish();

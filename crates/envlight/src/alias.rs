@@ -263,13 +263,16 @@ fn build_slots(func: &[f32], total: f64) -> Vec<Slot> {
     let n = func.len();
     let scale = n as f64 / total;
     let mut q: Vec<f64> = func.iter().map(|&x| x as f64 * scale).collect();
-    let mut slots = vec![
+    // Slots are drawn uniformly at random: the table most in need of large pages.
+    let mut slots = Vec::with_capacity(n);
+    crate::math::advise_huge_pages(slots.spare_capacity_mut());
+    slots.resize(
+        n,
         Slot {
             threshold: 1.0,
             alias: 0,
-        };
-        n
-    ];
+        },
+    );
     let mut light: Vec<u32> = Vec::new();
     let mut heavy: Vec<u32> = Vec::new();
     for (i, &qi) in q.iter().enumerate() {

@@ -36,7 +36,9 @@
 //! flat arrays (no per-row allocation), plus a marginal distribution over the rows'
 //! integrals. Memory per cell: 4 bytes of CDF plus 1 to 2 bytes of guide table.
 
-use crate::math::{floor_index, floor_index_i32, len_f32, len_f64, prefetch_ptr, prefetch_read};
+use crate::math::{
+    advise_huge_pages, floor_index, floor_index_i32, len_f32, len_f64, prefetch_ptr, prefetch_read,
+};
 
 /// The most samples [`Distribution2D::sample_block`] takes at once.
 pub const STAGED_BLOCK: usize = 32;
@@ -562,6 +564,7 @@ impl Distribution2D {
     ) -> (Self, Vec<T>) {
         assert!(nu > 0 && nv > 0, "bad 2D grid shape");
         let mut conditional_cdf = vec![0u32; (nu + 1) * nv];
+        advise_huge_pages(&conditional_cdf);
         let guide_len = 1usize << guide_bits(nu);
         let mut conditional_guide = vec![0u32; guide_len * nv];
         let mut rows: Vec<(&mut [u32], &mut [u32])> = conditional_cdf

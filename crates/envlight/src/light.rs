@@ -1424,7 +1424,11 @@ mod tests {
             Vec3::new(f32::NAN, 0.0, 1.0),
         ]);
         for (sampler, lookup, mapping) in [
-            (Sampler::Inversion, Lookup::Bilinear, Mapping::Equirectangular),
+            (
+                Sampler::Inversion,
+                Lookup::Bilinear,
+                Mapping::Equirectangular,
+            ),
             (Sampler::Alias, Lookup::Nearest, Mapping::Equirectangular),
             (Sampler::Hierarchical, Lookup::Bilinear, Mapping::EqualArea),
         ] {
@@ -1441,7 +1445,11 @@ mod tests {
             let mut radiance = vec![[0.0; 3]; dirs.len()];
             light.radiance_chunk(&dirs, &mut radiance);
             for (k, &d) in dirs.iter().enumerate() {
-                assert_eq!(pdfs[k].to_bits(), light.pdf(d).to_bits(), "{sampler:?} {d:?}");
+                assert_eq!(
+                    pdfs[k].to_bits(),
+                    light.pdf(d).to_bits(),
+                    "{sampler:?} {d:?}"
+                );
                 assert_eq!(
                     radiance[k].map(f32::to_bits),
                     light.radiance(d).map(f32::to_bits),
