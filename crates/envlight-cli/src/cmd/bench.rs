@@ -64,33 +64,40 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let light_texels = light_image.width() * light_image.height();
     let threads = rayon::current_num_threads();
 
-    let best_ms = |mut f: Box<dyn FnMut() + '_>| {
-        (0..args.repeat)
+    // The fastest of `--repeat` runs of `work` on what `setup` prepares for it,
+    // each timed from its start until its result exists: neither the setup nor
+    // freeing the result is timed.
+    fn best_ms<S, T>(
+        repeat: u32,
+        mut setup: impl FnMut() -> S,
+        mut work: impl FnMut(S) -> T,
+    ) -> f64 {
+        (0..repeat)
             .map(|_| {
+                let input = setup();
                 let started = Instant::now();
-                f();
-                started.elapsed().as_secs_f64() * 1e3
+                let result = black_box(work(input));
+                let ms = started.elapsed().as_secs_f64() * 1e3;
+                drop(result);
+                ms
             })
             .fold(f64::INFINITY, f64::min)
+    }
+    let floor_ms = best_ms(args.repeat, || (), |()| memory_floor(image.texels()));
+    // Each build gets its own copy of the map, made before its clock starts.
+    let best_build_ms = || {
+        best_ms(
+            args.repeat,
+            || image.clone(),
+            |copy| EnvironmentLight::new(copy, options),
+        )
     };
-
-    let floor_ms = best_ms(Box::new(|| {
-        black_box(memory_floor(image.texels()));
-    }));
-    let build = || {
-        let light = EnvironmentLight::new(image.clone(), options);
-        black_box(light.is_ok());
-    };
-    // The clone is part of neither figure: time it alone and subtract it.
-    let clone_ms = best_ms(Box::new(|| {
-        black_box(image.clone());
-    }));
-    let build_ms = (best_ms(Box::new(build)) - clone_ms).max(0.0);
+    let build_ms = best_build_ms();
     let one_thread = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .context("cannot start a one-thread pool")?;
-    let build_ms_1thread = (one_thread.install(|| best_ms(Box::new(build))) - clone_ms).max(0.0);
+    let build_ms_1thread = one_thread.install(best_build_ms);
 
     let n = args.queries;
     let xi: Vec<[f32; 2]> = (0..n).map(|k| envlight::rng::xi_2d(0xbe7c, k)).collect();
