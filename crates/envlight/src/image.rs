@@ -48,11 +48,16 @@ pub struct Sanitized {
     pub non_finite_texels: usize,
 }
 
+/// The longest side an image may have, 2²⁴ texels: every index and side is then
+/// exact as an f32, and fits the 32-bit lanes of the batch lookups.
+pub const MAX_SIDE: usize = 1 << 24;
+
 impl EnvImage {
     /// Builds an image from texels in row-major order (row 0 at the top).
     ///
     /// # Errors
-    /// [`Error::InvalidDimensions`] when a side is 0 or `texels.len() != width*height`;
+    /// [`Error::InvalidDimensions`] when a side is 0 or above [`MAX_SIDE`], or
+    /// `texels.len() != width*height`;
     /// [`Error::NonFiniteTexel`] for the first NaN/infinite channel;
     /// [`Error::InvalidOption`] for a negative channel (use [`EnvImage::from_raw`] to
     /// clamp instead).
@@ -102,6 +107,12 @@ impl EnvImage {
             return Err(Error::InvalidDimensions {
                 source_name: source_name.to_string(),
                 detail: format!("{width}x{height} with {} texels", texels.len()),
+            });
+        }
+        if width.max(height) > MAX_SIDE {
+            return Err(Error::InvalidDimensions {
+                source_name: source_name.to_string(),
+                detail: format!("{width}x{height}: a side above {MAX_SIDE} texels"),
             });
         }
         let mut report = Sanitized::default();
@@ -315,7 +326,8 @@ impl EnvImage {
     ) -> LookupBlock<N> {
         let (w, h) = (self.width, self.height);
         let (wf, hf) = (len_f32(w), len_f32(h));
-        // Image sides are far below 2³¹ (a texel count over 2³¹ is 24 GB).
+        // Sides are at most MAX_SIDE = 2²⁴ (checked when the image is made), so
+        // `2 w` and every index fit an i32.
         let (w32, h32) = (w as i32, h as i32);
         let mut b = LookupBlock {
             mode,
@@ -466,6 +478,15 @@ fn clamped_pair(t: f32, n: usize) -> (usize, usize, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sides_above_the_limit_are_refused() {
+        // Zeroed memory the kernel maps lazily: the check comes before any texel is read.
+        let texels = vec![[0.0f32; 3]; MAX_SIDE + 1];
+        let err = EnvImage::new(MAX_SIDE + 1, 1, texels).unwrap_err();
+        assert!(matches!(err, Error::InvalidDimensions { .. }), "{err}");
+        assert!(EnvImage::new(1, MAX_SIDE, vec![[0.0f32; 3]; MAX_SIDE]).is_ok());
+    }
 
     fn ramp() -> EnvImage {
         EnvImage::from_fn(4, 2, |x, y| [x as f32, y as f32, 1.0]).unwrap()

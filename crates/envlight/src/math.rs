@@ -38,8 +38,7 @@ pub(crate) fn floor_index_i32(x: f32, last: i32) -> i32 {
 
 /// `⌊x⌋` without a library call (f32::floor is one on the x86-64 baseline, which
 /// has no rounding instruction), in operations that vectorize: exactly
-/// `x.floor()` for every finite x and ±∞ (NaN gives NaN or a finite value; the
-/// callers discard it).
+/// `x.floor()` for every x (finite, ±∞ and NaN), except that -0 gives +0.
 #[inline(always)]
 pub(crate) fn floor_f32(x: f32) -> f32 {
     // Above 2²³ in magnitude every f32 is an integer.
@@ -339,7 +338,8 @@ fn atan2_pair_sse2(y: [f32; 2], x: [f32; 2]) -> [f64; 2] {
 /// selects where the scalar version branches, so that the compiler turns the loop
 /// into vector instructions (two f64 lanes per SSE2 register, four per AVX one):
 /// the angle stage of the batch queries. The same operations in the same order as
-/// [`atan2_pair`], so bit for bit its values.
+/// [`atan2_pair`], so bit for bit its values. The pair keeps its intrinsics: as
+/// two lanes of this loop, a single pdf measured 227 instructions against 184.
 #[inline(always)]
 pub(crate) fn atan2_lanes<const N: usize>(y: &[f64; N], x: &[f64; N]) -> [f64; N] {
     use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
@@ -580,6 +580,46 @@ mod tests {
                 assert!(
                     g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
                     "atan2_lanes({y}, {x}): {g} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn vector_friendly_floors_match_the_scalar_ones() {
+        let mut rng = crate::rng::SplitMix64::new(3);
+        let mut xs: Vec<f32> = (0..100_000)
+            .map(|k| (rng.next_f32() * 2.0 - 1.0) * [1.0f32, 1e3, 1e7, 1e9, 1e-30][k % 5])
+            .collect();
+        xs.extend([
+            0.0,
+            1.0,
+            -1.0,
+            0.5,
+            -0.5,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            -8_388_609.0,
+            2_147_483_520.0,
+            3e9,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ]);
+        for &x in &xs {
+            let (got, want) = (floor_f32(x), x.floor());
+            assert!(
+                got == want || (got.is_nan() && want.is_nan()),
+                "floor {x}: {got}"
+            );
+            for n in [1usize, 7, 4096, 1 << 30] {
+                assert_eq!(
+                    floor_index_i32(x, n as i32 - 1) as usize,
+                    floor_index(x, n),
+                    "{x} {n}"
                 );
             }
         }
