@@ -1,10 +1,11 @@
 //! Runs many `pdf`, `radiance` and `sample` queries on the built-in sky, for
 //! profilers (`valgrind --tool=callgrind`, `perf stat`): `cargo run --release
-//! --example query_profile -- [pdf|radiance|sample] [N] [WIDTH] [hot]` (the sky is
+//! --example query_profile -- [pdf|radiance|sample|build] [N] [WIDTH] [hot]` (the sky is
 //! WIDTH × WIDTH/2, 256 wide by default; `hot` cycles through 4096 queries, so the
 //! data they touch stays in cache, instead of drawing every query afresh). The
 //! queries are generated before the clock starts, and every output of a sample is
-//! folded into the printed sum so that none of it can be skipped.
+//! folded into the printed sum so that none of it can be skipped. `build` times N
+//! builds of the sky (N small) and prints the best.
 
 use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
 use std::hint::black_box;
@@ -21,8 +22,21 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(256)
         .max(2);
-    let light = EnvironmentLight::new(builtin::sky(width, width / 2), LightOptions::default())
-        .expect("the built-in sky builds");
+    let sky = builtin::sky(width, width / 2);
+    if what == "build" {
+        // N builds of the sky, each from its own copy made outside the clock.
+        let mut ms = f64::INFINITY;
+        for _ in 0..n {
+            let copy = sky.clone();
+            let started = std::time::Instant::now();
+            black_box(one_build(copy));
+            ms = ms.min(started.elapsed().as_secs_f64() * 1e3);
+        }
+        println!("build x {n}: best {ms:.2} ms");
+        return;
+    }
+    let light =
+        EnvironmentLight::new(sky, LightOptions::default()).expect("the built-in sky builds");
     let hot = args.next().as_deref() == Some("hot");
     let distinct = if hot { n.min(4096) } else { n };
     let xi: Vec<[f32; 2]> = (0..distinct as u64)
@@ -52,6 +66,11 @@ fn main() {
 
 // One query each, kept out of line so that a profiler can attribute (and callgrind
 // can collect, with `--toggle-collect=query_profile::one_*`) exactly its cost.
+
+#[inline(never)]
+fn one_build(image: envlight::EnvImage) -> EnvironmentLight {
+    EnvironmentLight::new(image, LightOptions::default()).expect("the built-in sky builds")
+}
 
 #[inline(never)]
 fn one_sample(light: &EnvironmentLight, xi: [f32; 2]) -> f32 {

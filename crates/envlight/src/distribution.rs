@@ -238,9 +238,19 @@ fn nudge_into_cell(x: f32, cell: usize, n: usize) -> f32 {
 /// backward from `CDF_ONE`. Both passes only move edges by the few units that
 /// rounding lost, and the CDF stays non-decreasing.
 fn build_cdf<T: Copy + Into<f64>>(f: &[T], cdf: &mut [u32], guide: &mut [u32]) -> f64 {
+    const TWO_TO_32: f64 = (1u64 << 32) as f64;
     let n = f.len();
     debug_assert_eq!(cdf.len(), n + 1);
-    let total: f64 = f.iter().map(|&v| v.into()).sum();
+    // Four partial sums, so that the adds do not wait on each other.
+    let mut partial = [0.0f64; 4];
+    let quads = f.chunks_exact(4);
+    let rest: f64 = quads.remainder().iter().map(|&v| v.into()).sum();
+    for quad in quads {
+        for (p, &v) in partial.iter_mut().zip(quad) {
+            *p += v.into();
+        }
+    }
+    let total = (partial[0] + partial[1]) + (partial[2] + partial[3]) + rest;
     let one = CDF_ONE as u64;
     cdf[0] = 0;
     if total > 0.0 && total.is_finite() {
@@ -249,17 +259,23 @@ fn build_cdf<T: Copy + Into<f64>>(f: &[T], cdf: &mut [u32], guide: &mut [u32]) -
         for (c, &v) in cdf[1..].iter_mut().zip(f) {
             let v: f64 = v.into();
             running += v;
-            // Never below the previous edge, which a widened cell may have raised.
-            // Rounded half up by truncation: f64::round is a library call on the
-            // x86-64 baseline, which cost the build a third of its time.
-            let mut edge = ((running * scale + 0.5) as u64).clamp(prev, one);
-            if v > 0.0 && edge == prev {
-                edge = prev + 1;
-                if edge > one {
-                    edge = one;
-                    overran = true;
-                }
-            }
+            // Rounded half up by truncation, through i64 (f64::round is a library
+            // call on the x86-64 baseline, and `as u64` a dozen instructions). Then
+            // never below the previous edge, which a widened cell may have raised,
+            // and a cell with mass at least one unit wide: branch-free, since
+            // whether a cell rounds to nothing is data the predictor cannot learn.
+            // Not `clamp`, which would pass a NaN through.
+            #[allow(clippy::manual_clamp)]
+            let rounded = (running * scale + 0.5).max(0.0).min(TWO_TO_32);
+            // SAFETY: `max` and `min` return their non-NaN operand, so `rounded` is
+            // a number in [0, 2³²], which an i64 holds; a plain `as` cast spends
+            // six more instructions per texel on NaN and range checks.
+            let rounded = unsafe { rounded.to_int_unchecked::<i64>() } as u64;
+            let edge = rounded.max(prev + u64::from(v > 0.0));
+            // Only a cell that had to be widened can pass CDF_ONE (`rounded` cannot:
+            // `running <= total` up to rounding, and the +0.5 truncates away).
+            overran |= edge > one;
+            let edge = edge.min(one);
             *c = edge as u32;
             prev = edge;
         }
@@ -286,17 +302,29 @@ fn build_cdf<T: Copy + Into<f64>>(f: &[T], cdf: &mut [u32], guide: &mut [u32]) -
 }
 
 /// `guide[k]` = the last cell `o` (of `n = cdf.len() - 1`) with
-/// `cdf[o] <= k · 2³² / guide.len()`, by one merge-like pass over both arrays.
+/// `cdf[o] <= k · 2³² / guide.len()`.
 fn build_guide(cdf: &[u32], guide: &mut [u32]) {
     let n = cdf.len() - 1;
     let shift = 32 - guide.len().ilog2();
-    let mut o = 0usize;
-    for (k, g) in guide.iter_mut().enumerate() {
-        let start = ((k as u64) << shift).min(CDF_ONE as u64) as u32;
-        while o + 1 < n && cdf[o + 1] <= start {
-            o += 1;
+    // Cell o belongs in every entry k with cdf[o] <= k · 2^shift, the first of
+    // which is ⌈cdf[o] / 2^shift⌉. Writing o there for every cell, in increasing
+    // order, leaves each entry with the last cell that starts exactly at it (or
+    // 0); a running maximum then carries each cell on to the entries it covers.
+    // No data-dependent branches, where a merge of the two arrays mispredicts
+    // on about every other cell.
+    guide.fill(0);
+    let round_up = (1u64 << shift) - 1;
+    let len = guide.len();
+    for (o, &c) in (1..n as u32).zip(&cdf[1..n]) {
+        let k = ((c as u64 + round_up) >> shift) as usize;
+        if k < len {
+            guide[k] = o;
         }
-        *g = o as u32;
+    }
+    let mut last = 0;
+    for g in guide.iter_mut() {
+        last = last.max(*g);
+        *g = last;
     }
 }
 
@@ -312,7 +340,8 @@ pub(crate) fn inverse_or_zero(x: f64) -> f64 {
 /// A value usable as a density: finite and positive, otherwise 0.
 #[inline]
 pub(crate) fn sanitize(value: f32) -> f32 {
-    if value > 0.0 && value.is_finite() {
+    // `&` rather than `&&`: two compares and a select, which loops vectorize.
+    if (value > 0.0) & (value < f32::INFINITY) {
         value
     } else {
         0.0
@@ -888,6 +917,14 @@ mod tests {
             let d = Distribution1D::new(&f);
             assert!(d.cdf().windows(2).all(|c| c[0] <= c[1]), "{:?}", d.cdf());
             let view = d.view();
+            // Every guide entry is exactly the last cell starting at or before its
+            // slice (a smaller one would only slow the search, which the probes
+            // below cannot see).
+            for (k, &g) in view.guide.iter().enumerate() {
+                let start = (k as u64) << view.shift;
+                let expected = (0..n).rev().find(|&o| d.cdf()[o] as u64 <= start);
+                assert_eq!(Some(g as usize), expected, "n={n} entry {k}");
+            }
             let mut probes: Vec<u32> = (0..2000).map(|_| rng.next_u64() as u32).collect();
             for &c in d.cdf() {
                 probes.extend([c.saturating_sub(1), c, c.saturating_add(1)]);

@@ -1267,24 +1267,29 @@ fn importance_row(
             }
         }
         Lookup::Bilinear => {
-            // Vertical [1 6 1]/8 (clamped) into `out`, then horizontal.
-            out.copy_from_slice(cache.row(image, j.saturating_sub(1)).0);
-            for (o, &y) in out.iter_mut().zip(cache.row(image, (j + 1).min(h - 1)).0) {
-                *o += y;
-            }
-            for (o, &y) in out.iter_mut().zip(cache.row(image, j).0) {
-                *o = (*o + 6.0 * y) * 0.125;
-            }
-            let (first, last) = (out[0], out[w - 1]);
-            let (mut prev, beyond_last) = match mapping.wrap() {
+            // Vertical [1 6 1]/8 (clamped) into the cache's scratch row, then
+            // horizontal into `out`: two passes without branches, which vectorize.
+            cache.vertical_blur(image, j);
+            let vertical = &cache.blurred;
+            let (first, last) = (vertical[0], vertical[w - 1]);
+            let (before_first, beyond_last) = match mapping.wrap() {
                 WrapU::Periodic => (last, first),
                 WrapU::Clamp => (first, last),
             };
-            for i in 0..w {
-                let next = if i + 1 < w { out[i + 1] } else { beyond_last };
-                let centre = out[i];
-                out[i] = (prev + 6.0 * centre + next) * 0.125 * factor;
-                prev = centre;
+            let blur =
+                |prev: f32, centre: f32, next: f32| (prev + 6.0 * centre + next) * 0.125 * factor;
+            if w == 1 {
+                out[0] = blur(before_first, first, beyond_last);
+            } else {
+                for ((o, &centre), (&prev, &next)) in out[1..w - 1]
+                    .iter_mut()
+                    .zip(&vertical[1..w - 1])
+                    .zip(vertical.iter().zip(&vertical[2..]))
+                {
+                    *o = blur(prev, centre, next);
+                }
+                out[0] = blur(before_first, first, vertical[1]);
+                out[w - 1] = blur(vertical[w - 2], last, beyond_last);
             }
         }
     }
@@ -1314,17 +1319,23 @@ fn integral_rgb(row_sums: &[[f64; 3]], w: usize, lookup: Lookup, mapping: Mappin
     integral
 }
 
-/// Per-channel sums of a row of texels, in f64 (four partial sums per channel break
-/// the add dependency chain).
+/// Per-channel sums of a row of texels, in f64. The row is read as a flat run of
+/// floats with twelve partial sums (four texels' worth, so that partial `k` holds
+/// channel `k mod 3`): the adds are independent, and the loop vectorizes.
 fn rgb_sum(row: &[[f32; 3]]) -> [f64; 3] {
-    let mut partial = [[0.0f64; 3]; 4];
-    for (k, rgb) in row.iter().enumerate() {
-        let p = &mut partial[k & 3];
-        p[0] += rgb[0] as f64;
-        p[1] += rgb[1] as f64;
-        p[2] += rgb[2] as f64;
+    let flat = row.as_flattened();
+    let mut partial = [0.0f64; 12];
+    let chunks = flat.chunks_exact(12);
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        for (p, &x) in partial.iter_mut().zip(chunk) {
+            *p += x as f64;
+        }
     }
-    std::array::from_fn(|c| (partial[0][c] + partial[1][c]) + (partial[2][c] + partial[3][c]))
+    for (p, &x) in partial.iter_mut().zip(rest) {
+        *p += x as f64;
+    }
+    std::array::from_fn(|c| (partial[c] + partial[c + 3]) + (partial[c + 6] + partial[c + 9]))
 }
 
 /// The luminance of the last three image rows a build task asked for, with each
@@ -1332,12 +1343,30 @@ fn rgb_sum(row: &[[f32; 3]]) -> [f64; 3] {
 /// per block of rows instead of three times.
 struct LuminanceRows {
     slots: [(usize, Vec<f32>, [f64; 3]); 3],
+    /// The vertically filtered luminance of the row being built.
+    blurred: Vec<f32>,
 }
 
 impl LuminanceRows {
     fn new(w: usize) -> Self {
         Self {
             slots: std::array::from_fn(|_| (usize::MAX, vec![0.0; w], [0.0; 3])),
+            blurred: vec![0.0; w],
+        }
+    }
+
+    /// Fills `blurred` with the `[1 6 1]/8` filter in v of row `j`'s luminance (the
+    /// rows above and below clamped to the image).
+    fn vertical_blur(&mut self, image: &EnvImage, j: usize) {
+        let h = image.height();
+        // Each distinct row into the cache first; then all three are borrowed.
+        for row in [j.saturating_sub(1), j, (j + 1).min(h - 1)] {
+            self.row(image, row);
+        }
+        let slot = |j: usize| &self.slots.iter().find(|s| s.0 == j).expect("cached").1;
+        let (above, centre, below) = (slot(j.saturating_sub(1)), slot(j), slot((j + 1).min(h - 1)));
+        for (((b, &a), &c), &d) in self.blurred.iter_mut().zip(above).zip(centre).zip(below) {
+            *b = (a + d + 6.0 * c) * 0.125;
         }
     }
 
@@ -1412,6 +1441,62 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The importance rows, filter and RGB sums against a texel-by-texel reading of
+    /// DESIGN.md §4 step 1, on small maps where every texel is next to an edge.
+    #[test]
+    fn importance_rows_match_their_definition() {
+        let mut rng = crate::rng::SplitMix64::new(5);
+        for (w, h) in [(1, 1), (1, 3), (2, 1), (2, 2), (3, 5), (7, 4), (13, 6)] {
+            let texels: Vec<[f32; 3]> = (0..w * h)
+                .map(|_| [rng.next_f32() * 4.0, rng.next_f32(), rng.next_f32() * 0.5])
+                .collect();
+            let image = EnvImage::new(w, h, texels).expect("a valid image");
+            for mapping in Mapping::ALL {
+                for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+                    let mut cache = LuminanceRows::new(w);
+                    let mut out = vec![0.0f32; w];
+                    for j in 0..h {
+                        let sums = importance_row(&image, lookup, mapping, &mut cache, j, &mut out);
+                        let factor = mapping.area_factor((j as f64 + 0.5) / h as f64);
+                        let y = |i: isize, j: isize| {
+                            let j = j.clamp(0, h as isize - 1) as usize;
+                            let i = match mapping.wrap() {
+                                WrapU::Periodic => i.rem_euclid(w as isize),
+                                WrapU::Clamp => i.clamp(0, w as isize - 1),
+                            } as usize;
+                            luminance(image.texel(i, j)) as f64
+                        };
+                        for (i, &got) in out.iter().enumerate() {
+                            let (i, jj) = (i as isize, j as isize);
+                            let want = match lookup {
+                                Lookup::Nearest => y(i, jj),
+                                Lookup::Bilinear => {
+                                    let weights = [1.0, 6.0, 1.0];
+                                    let mut sum = 0.0;
+                                    for (a, wa) in (-1..=1).zip(weights) {
+                                        for (b, wb) in (-1..=1).zip(weights) {
+                                            sum += wa * wb * y(i + a, jj + b);
+                                        }
+                                    }
+                                    sum / 64.0
+                                }
+                            } * factor;
+                            let err = (got as f64 - want).abs();
+                            assert!(
+                                err <= 1e-6 * want.abs().max(1e-30),
+                                "{w}x{h} {mapping:?} {lookup:?} ({i}, {j}): {got} vs {want}"
+                            );
+                        }
+                        for (c, &sum) in sums.iter().enumerate() {
+                            let want: f64 = image.row(j).iter().map(|t| t[c] as f64).sum();
+                            assert!((sum - want).abs() <= 1e-12 * want.abs(), "{sum} vs {want}");
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// The batch kernels as built for the baseline target (two f64 lanes), which
     /// the public batch calls skip on a CPU with AVX2: bit for bit the single
