@@ -1,6 +1,6 @@
 //! Runs many `pdf`, `radiance` and `sample` queries on the built-in sky, for
 //! profilers (`valgrind --tool=callgrind`, `perf stat`): `cargo run --release
-//! --example query_profile -- [pdf|radiance|sample|build] [N] [WIDTH] [hot]` (the sky is
+//! --example query_profile -- [pdf|radiance|sample|build|pdf-batch|radiance-batch] [N] [WIDTH] [hot]` (the sky is
 //! WIDTH × WIDTH/2, 256 wide by default; `hot` cycles through 4096 queries, so the
 //! data they touch stays in cache, instead of drawing every query afresh). The
 //! queries are generated before the clock starts, and every output of a sample is
@@ -46,6 +46,21 @@ fn main() {
         .iter()
         .map(|&x| envlight::math::uniform_sphere(x))
         .collect();
+    if let Some(batch) = what.strip_suffix("-batch") {
+        // `pdf-batch` / `radiance-batch`: the batch calls over the queries, N in all.
+        let started = std::time::Instant::now();
+        let (mut pdfs, mut radiance) = (vec![0.0f32; distinct], vec![[0.0f32; 3]; distinct]);
+        for _ in 0..n / distinct {
+            match batch {
+                "radiance" => light.radiance_batch(&directions, &mut radiance),
+                _ => light.pdf_batch(&directions, &mut pdfs),
+            }
+            black_box((&pdfs, &radiance));
+        }
+        let ns = started.elapsed().as_secs_f64() * 1e9 / n.max(1) as f64;
+        println!("{what} x {n}: {ns:.1} ns per direction");
+        return;
+    }
     let started = std::time::Instant::now();
     let mut acc = 0.0f32;
     for k in 0..n {
