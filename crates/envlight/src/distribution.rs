@@ -598,6 +598,7 @@ impl Distribution2D {
         advise_huge_pages(&conditional_cdf);
         let guide_len = 1usize << guide_bits(nu);
         let mut conditional_guide = vec![0u32; guide_len * nv];
+        advise_huge_pages(&conditional_guide);
         let mut rows: Vec<(&mut [u32], &mut [u32])> = conditional_cdf
             .chunks_mut(nu + 1)
             .zip(conditional_guide.chunks_mut(guide_len))
