@@ -924,16 +924,23 @@ impl EnvironmentLight {
             .into_par_iter()
             .map_init(init, |(cache, [above, here, below]), j| {
                 let (mut ey, mut ey2p) = (0.0f64, 0.0f64);
-                let centre_v = ((j as f64 + 0.5) / h as f64) as f32;
-                let texel_pdf: Vec<f64> = if constant_per_texel {
-                    (0..w)
-                        .map(|i| {
-                            let u = ((i as f64 + 0.5) / w as f64) as f32;
-                            self.planar.pdf([u, centre_v]) as f64
-                        })
-                        .collect()
-                } else {
-                    Vec::new()
+                // The reciprocal of each texel's (constant) pdf, +∞ where it is 0:
+                // one division per texel instead of one per node. The densities'
+                // grids are the image's, so texel (i, j) is cell (i, j).
+                let reciprocal = |p: f32| {
+                    if p > 0.0 {
+                        1.0 / p as f64
+                    } else {
+                        f64::INFINITY
+                    }
+                };
+                let inv_texel_pdf: Vec<f64> = match &self.planar {
+                    Planar::Inversion(d) => (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect(),
+                    Planar::Alias(d) => (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect(),
+                    Planar::Hierarchical(d) => {
+                        (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect()
+                    }
+                    Planar::Bilinear(_) => Vec::new(),
                 };
                 // The neighbouring rows a node above or below the centre blends with
                 // (clamped at the top and bottom).
@@ -958,6 +965,13 @@ impl EnvironmentLight {
                             }
                         }
                     }
+                    if constant_per_texel {
+                        let (sum_y, sum_y2p) =
+                            node_row_moments(&blended, &inv_texel_pdf, lookup, periodic);
+                        ey += sum_y * dw;
+                        ey2p += sum_y2p * (dw * dw);
+                        continue;
+                    }
                     for i in 0..w {
                         let left = if i > 0 {
                             blended[i - 1]
@@ -973,32 +987,6 @@ impl EnvironmentLight {
                         } else {
                             blended[w - 1]
                         };
-                        if constant_per_texel {
-                            // The pdf is constant over the texel and y is linear on
-                            // each half of it (or constant), so the four u nodes,
-                            // exact for cubics on each half, sum to closed forms:
-                            // Σ y = 4 × mean and Σ y² = 4 × mean of the square.
-                            let c = blended[i] as f64;
-                            let (sum_y, sum_y2) = match lookup {
-                                Lookup::Nearest => (4.0 * c, 4.0 * c * c),
-                                Lookup::Bilinear => {
-                                    let (l, r) =
-                                        (0.5 * (left as f64 + c), 0.5 * (c + right as f64));
-                                    let square = |a: f64, b: f64| (a * a + a * b + b * b) / 3.0;
-                                    (l + 2.0 * c + r, 2.0 * (square(l, c) + square(c, r)))
-                                }
-                            };
-                            ey += sum_y * dw;
-                            if sum_y2 > 0.0 {
-                                let p = texel_pdf[i];
-                                ey2p += if p > 0.0 {
-                                    sum_y2 * dw * dw / p
-                                } else {
-                                    f64::INFINITY
-                                };
-                            }
-                            continue;
-                        }
                         for &tu in &nodes {
                             let y = match lookup {
                                 Lookup::Nearest => blended[i],
@@ -1031,6 +1019,64 @@ impl EnvironmentLight {
             .into_iter()
             .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
+}
+
+/// One row of quadrature nodes (at one height) of [`EnvironmentLight::efficiency`]
+/// for a density that is constant over each texel: `(Σ_i Σ_nodes y, Σ_i Σ_nodes y² /
+/// p_i)` over the texels' four u nodes, from the row's reconstructed luminance
+/// `blended` at the texel centres and each texel's `1 / p` (+∞ where p = 0).
+///
+/// Within a texel, y is constant (nearest) or linear on each half (bilinear), and the
+/// four Gauss-Legendre nodes, exact for cubics on each half, sum to closed forms:
+/// `Σ y = 4 mean(y)` and `Σ y² = 4 mean(y²)`. The texels between the edges go
+/// through a loop without branches, with four partial sums.
+fn node_row_moments(
+    blended: &[f32],
+    inv_pdf: &[f64],
+    lookup: Lookup,
+    periodic: bool,
+) -> (f64, f64) {
+    let w = blended.len();
+    let texel = |left: f32, centre: f32, right: f32, inv_pdf: f64| {
+        let c = centre as f64;
+        let (sum_y, sum_y2) = match lookup {
+            Lookup::Nearest => (4.0 * c, 4.0 * c * c),
+            Lookup::Bilinear => {
+                let (l, r) = (0.5 * (left as f64 + c), 0.5 * (c + right as f64));
+                // The mean of the square of a line from a to b is (a² + ab + b²) / 3.
+                let square = |a: f64, b: f64| a * a + a * b + b * b;
+                (l + 2.0 * c + r, (2.0 / 3.0) * (square(l, c) + square(c, r)))
+            }
+        };
+        // A texel with no light adds nothing, even where the pdf is 0.
+        (sum_y, if sum_y2 > 0.0 { sum_y2 * inv_pdf } else { 0.0 })
+    };
+    let (first, last) = (blended[0], blended[w - 1]);
+    let (before_first, beyond_last) = if periodic {
+        (last, first)
+    } else {
+        (first, last)
+    };
+    if w == 1 {
+        return texel(before_first, first, beyond_last, inv_pdf[0]);
+    }
+    let mut partial = [(0.0f64, 0.0f64); 4];
+    for (k, (window, &inv)) in blended.windows(3).zip(&inv_pdf[1..]).enumerate() {
+        let (y, y2p) = texel(window[0], window[1], window[2], inv);
+        let p = &mut partial[k & 3];
+        p.0 += y;
+        p.1 += y2p;
+    }
+    let edges = [
+        texel(before_first, first, blended[1], inv_pdf[0]),
+        texel(blended[w - 2], last, beyond_last, inv_pdf[w - 1]),
+    ];
+    let sum = |f: fn(&(f64, f64)) -> f64| {
+        (f(&partial[0]) + f(&partial[1]))
+            + (f(&partial[2]) + f(&partial[3]))
+            + (f(&edges[0]) + f(&edges[1]))
+    };
+    (sum(|p| p.0), sum(|p| p.1))
 }
 
 /// Directions per block in the batch queries' vectorized stage
@@ -1441,6 +1487,77 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The closed forms of one efficiency node row against the four Gauss-Legendre
+    /// nodes of each texel evaluated one by one, edges and zero pdfs included.
+    #[test]
+    fn node_row_moments_match_the_nodes() {
+        let g = 0.5 / 3f64.sqrt();
+        let nodes = [
+            0.25 - 0.5 * g,
+            0.25 + 0.5 * g,
+            0.75 - 0.5 * g,
+            0.75 + 0.5 * g,
+        ];
+        let mut rng = crate::rng::SplitMix64::new(9);
+        for w in [1usize, 2, 3, 4, 7, 12, 13] {
+            // Runs of three black texels, the middle one (whose nodes all see black)
+            // with pdf 0; and on the two-texel row a lit texel with pdf 0, which
+            // makes the sum infinite.
+            let blended: Vec<f32> = (0..w)
+                .map(|i| {
+                    if (3..6).contains(&(i % 6)) {
+                        0.0
+                    } else {
+                        rng.next_f32() * 3.0
+                    }
+                })
+                .collect();
+            let inv_pdf: Vec<f64> = (0..w)
+                .map(|i| {
+                    if i % 6 == 4 || (i == 1 && w == 2) {
+                        f64::INFINITY
+                    } else {
+                        1.0 / (0.1 + rng.next_f32() as f64)
+                    }
+                })
+                .collect();
+            for periodic in [true, false] {
+                for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+                    let at = |i: isize| {
+                        let i = if periodic {
+                            i.rem_euclid(w as isize)
+                        } else {
+                            i.clamp(0, w as isize - 1)
+                        };
+                        blended[i as usize] as f64
+                    };
+                    let (mut want_y, mut want_y2p) = (0.0f64, 0.0f64);
+                    for i in 0..w as isize {
+                        for &t in &nodes {
+                            let y = match lookup {
+                                Lookup::Nearest => at(i),
+                                Lookup::Bilinear if t < 0.5 => {
+                                    at(i) + (0.5 - t) * (at(i - 1) - at(i))
+                                }
+                                Lookup::Bilinear => at(i) + (t - 0.5) * (at(i + 1) - at(i)),
+                            };
+                            want_y += y;
+                            if y > 0.0 {
+                                want_y2p += y * y * inv_pdf[i as usize];
+                            }
+                        }
+                    }
+                    let (y, y2p) = node_row_moments(&blended, &inv_pdf, lookup, periodic);
+                    let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * b.abs();
+                    assert!(
+                        close(y, want_y) && close(y2p, want_y2p),
+                        "w={w} periodic={periodic} {lookup:?}: ({y}, {y2p}) vs ({want_y}, {want_y2p})"
+                    );
+                }
+            }
+        }
+    }
 
     /// The importance rows, filter and RGB sums against a texel-by-texel reading of
     /// DESIGN.md §4 step 1, on small maps where every texel is next to an edge.
