@@ -898,13 +898,7 @@ impl EnvironmentLight {
     /// which are constant over each texel.
     fn luminance_moments(&self) -> (f64, f64) {
         let (w, h) = (self.image.width(), self.image.height());
-        let g = 0.5 / 3f64.sqrt();
-        let nodes = [
-            0.25 - 0.5 * g,
-            0.25 + 0.5 * g,
-            0.75 - 0.5 * g,
-            0.75 + 0.5 * g,
-        ];
+        let nodes = efficiency_nodes();
         let (mapping, lookup) = (self.options.mapping, self.options.lookup);
         let periodic = mapping.wrap() == WrapU::Periodic;
         let jacobian_scale = match mapping {
@@ -1019,6 +1013,18 @@ impl EnvironmentLight {
             .into_iter()
             .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
+}
+
+/// The efficiency quadrature's node positions within a texel, along each axis:
+/// two Gauss-Legendre points in each half.
+fn efficiency_nodes() -> [f64; 4] {
+    let g = 0.5 / 3f64.sqrt();
+    [
+        0.25 - 0.5 * g,
+        0.25 + 0.5 * g,
+        0.75 - 0.5 * g,
+        0.75 + 0.5 * g,
+    ]
 }
 
 /// One row of quadrature nodes (at one height) of [`EnvironmentLight::efficiency`]
@@ -1492,13 +1498,7 @@ mod tests {
     /// nodes of each texel evaluated one by one, edges and zero pdfs included.
     #[test]
     fn node_row_moments_match_the_nodes() {
-        let g = 0.5 / 3f64.sqrt();
-        let nodes = [
-            0.25 - 0.5 * g,
-            0.25 + 0.5 * g,
-            0.75 - 0.5 * g,
-            0.75 + 0.5 * g,
-        ];
+        let nodes = efficiency_nodes();
         let mut rng = crate::rng::SplitMix64::new(9);
         for w in [1usize, 2, 3, 4, 7, 12, 13] {
             // Runs of three black texels, the middle one (whose nodes all see black)
