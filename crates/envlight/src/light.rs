@@ -713,17 +713,27 @@ impl EnvironmentLight {
         prepare: impl Fn(&UvBlock) -> P,
         mut finish: impl FnMut(P, &mut [O]),
     ) {
-        let mut pending: Option<(P, &mut [O])> = None;
-        for (dirs, out) in dirs.chunks(QUERY_BLOCK).zip(out.chunks_mut(QUERY_BLOCK)) {
-            // Coordinates in separate arrays, the layout vector instructions read.
-            let (mut x, mut y, mut z) = (
+        // Coordinates in separate arrays, the layout vector instructions read. Each
+        // block's arrays are written one block ahead: vector loads of data just
+        // written by scalar stores wait for the stores to retire (they cannot be
+        // forwarded), which cost about 5% of a batch pdf or radiance query.
+        #[inline(always)]
+        fn transpose(dirs: &[Vec3]) -> [[f32; QUERY_BLOCK]; 3] {
+            let mut xyz = [
                 [0.0f32; QUERY_BLOCK],
                 [0.0; QUERY_BLOCK],
                 [1.0; QUERY_BLOCK],
-            );
+            ];
             for (i, d) in dirs.iter().enumerate() {
-                (x[i], y[i], z[i]) = (d.x, d.y, d.z);
+                (xyz[0][i], xyz[1][i], xyz[2][i]) = (d.x, d.y, d.z);
             }
+            xyz
+        }
+        let mut pending: Option<(P, &mut [O])> = None;
+        let mut blocks = dirs.chunks(QUERY_BLOCK).zip(out.chunks_mut(QUERY_BLOCK));
+        let mut next = blocks.next().map(|(d, o)| (transpose(d), o));
+        while let Some(([x, y, z], out)) = next.take() {
+            next = blocks.next().map(|(d, o)| (transpose(d), o));
             let prepared = prepare(&self.to_uv_block(x, y, z));
             if let Some((previous, previous_out)) = pending.replace((prepared, out)) {
                 finish(previous, previous_out);
