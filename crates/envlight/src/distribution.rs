@@ -272,11 +272,12 @@ fn build_cdf<T: Copy + Into<f64>>(f: &[T], cdf: &mut [u32], guide: &mut [u32]) -
             // six more instructions per texel on NaN and range checks.
             let rounded = unsafe { rounded.to_int_unchecked::<i64>() } as u64;
             let edge = rounded.max(prev + u64::from(v > 0.0));
-            // Only a cell that had to be widened can pass CDF_ONE (`rounded` cannot:
-            // `running <= total` up to rounding, and the +0.5 truncates away). The
-            // edge is capped where it is stored, not in `prev`, which keeps the
-            // chain from one cell to the next at an add and a max; past CDF_ONE
-            // every later edge is stored as CDF_ONE either way.
+            // An edge passes CDF_ONE when cells had to be widened near the end, or
+            // (on rows of about 2²⁰ cells or more) when `running`, summed in another
+            // order than `total`, ends a few ulps above it; the backward pass below
+            // repairs both. The edge is capped where it is stored, not in `prev`,
+            // which keeps the chain from one cell to the next at an add and a max;
+            // past CDF_ONE every later edge is stored as CDF_ONE either way.
             overran |= edge > one;
             *c = edge.min(one) as u32;
             prev = edge;

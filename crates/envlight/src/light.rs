@@ -686,18 +686,17 @@ impl EnvironmentLight {
                 for (&iu, &iv) in iu.iter().zip(&iv) {
                     prefetch(iu as usize, iv as usize);
                 }
-                (iu, iv, block.inv_jacobian)
+                CellBlock {
+                    iu,
+                    iv,
+                    inv_jacobian: block.inv_jacobian,
+                }
             },
             #[inline(always)]
-            |(iu, iv, inv_jacobian): &(
-                [u32; QUERY_BLOCK],
-                [u32; QUERY_BLOCK],
-                [f32; QUERY_BLOCK],
-            ),
-             out| {
+            |cells: &CellBlock, out| {
                 for (i, o) in out.iter_mut().enumerate() {
-                    let planar = cell_pdf(iu[i] as usize, iv[i] as usize);
-                    *o = solid_angle(planar, inv_jacobian[i]);
+                    let planar = cell_pdf(cells.iu[i] as usize, cells.iv[i] as usize);
+                    *o = solid_angle(planar, cells.inv_jacobian[i]);
                 }
             },
         );
@@ -1117,6 +1116,13 @@ const QUERY_BLOCK: usize = 16;
 struct UvBlock {
     u: [f32; QUERY_BLOCK],
     v: [f32; QUERY_BLOCK],
+    inv_jacobian: [f32; QUERY_BLOCK],
+}
+
+/// A block's grid cells (`iu`, `iv`) and reciprocal Jacobians, lane by lane.
+struct CellBlock {
+    iu: [u32; QUERY_BLOCK],
+    iv: [u32; QUERY_BLOCK],
     inv_jacobian: [f32; QUERY_BLOCK],
 }
 
