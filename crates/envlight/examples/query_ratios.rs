@@ -6,7 +6,9 @@
 //! on a busy machine where criterion's separate runs drift by ±20%.
 //!
 //! The batch rows time `pdf_batch` / `radiance_batch` on one thread against the
-//! baseline's one-at-a-time queries.
+//! baseline's one-at-a-time queries. The chained rows time queries that cannot
+//! overlap (each waits for the one before): the latency of one query, which
+//! bounds what a loop of single calls can reach (see BENCHMARKS.md).
 //!
 //! `cargo run --release --example query_ratios -- [WIDTH] [ROUNDS]` (the built-in
 //! sky, WIDTH × WIDTH/2, 4096 by default; 300 rounds).
@@ -107,6 +109,16 @@ fn main() {
             radiance(&nearest, &dirs),
         ),
         (
+            "pdf, chained (latency)",
+            chained(|d| base.pdf(d), &dirs),
+            chained(|d| bilinear.pdf(d), &dirs),
+        ),
+        (
+            "radiance, chained (latency)",
+            chained(|d| base.radiance(d)[1], &dirs),
+            chained(|d| bilinear.radiance(d)[1], &dirs),
+        ),
+        (
             "pdf, batch",
             Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()),
             Box::new(|| {
@@ -133,6 +145,20 @@ fn main() {
         .build()
         .expect("a one-thread pool");
     one_thread.install(|| report(&cases, rounds));
+}
+
+/// Queries made one after another, each direction nudged by the previous result
+/// (`x + r·0`, which the compiler cannot drop: `r` could be infinite), so that no
+/// two overlap: the time of one query's whole dependent chain, plus a
+/// multiplication and an addition.
+fn chained<'a>(query: impl Fn(Vec3) -> f32 + Sync + 'a, dirs: &'a [Vec3]) -> Run<'a> {
+    Box::new(move || {
+        let mut r = 0.0f32;
+        for &d in dirs {
+            r = query(Vec3::new(d.x + r * 0.0, d.y, d.z));
+        }
+        r
+    })
 }
 
 fn radiance_batch<'a>(light: &'a EnvironmentLight, dirs: &'a [Vec3]) -> Run<'a> {
