@@ -329,11 +329,29 @@ fn fixed_24(xi: f32) -> u64 {
     ((xi * (1u32 << 24) as f32) as u32).min((1 << 24) - 1) as u64
 }
 
-/// Test helpers shared by the sampler tests of this crate: a chi-square
-/// goodness-of-fit test and a per-call timer.
+/// Test helpers shared by the sampler tests of this crate: random grids, a
+/// chi-square goodness-of-fit test and a per-call timer.
 #[cfg(test)]
 pub(crate) mod test_support {
+    use crate::rng::SplitMix64;
     use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+    /// Random values over four decades, a `zero_fraction` of them 0, never all 0.
+    pub(crate) fn random_grid(rng: &mut SplitMix64, n: usize, zero_fraction: f64) -> Vec<f32> {
+        let mut f: Vec<f32> = (0..n)
+            .map(|_| {
+                if rng.next_f64() < zero_fraction {
+                    0.0
+                } else {
+                    10f32.powf(4.0 * rng.next_f32() - 2.0)
+                }
+            })
+            .collect();
+        if f.iter().all(|&x| x == 0.0) {
+            f[n / 2] = 1.0;
+        }
+        f
+    }
 
     /// Checks a sampler's cell pdfs against `f / I` to f32 rounding, and the
     /// inversion sampler's against the same to its CDFs' resolution (each edge is
@@ -437,23 +455,6 @@ mod tests {
     /// Significance level of every chi-square test here.
     const ALPHA: f64 = 1e-3;
 
-    /// Random values over four decades, a `zero_fraction` of them 0, never all 0.
-    fn random_grid(rng: &mut SplitMix64, n: usize, zero_fraction: f64) -> Vec<f32> {
-        let mut f: Vec<f32> = (0..n)
-            .map(|_| {
-                if rng.next_f64() < zero_fraction {
-                    0.0
-                } else {
-                    10f32.powf(4.0 * rng.next_f32() - 2.0)
-                }
-            })
-            .collect();
-        if f.iter().all(|&x| x == 0.0) {
-            f[n / 2] = 1.0;
-        }
-        f
-    }
-
     /// Counts of samples per cell over `n` counter-based `ξ` of `seed`, checking each
     /// sample's pdf against the lookup and that it lies in its reported cell.
     fn cell_counts(t: &AliasTable2D, n: u64, seed: u64) -> Vec<u64> {
@@ -518,7 +519,7 @@ mod tests {
     fn pdf_matches_inversion_sampler_cell_by_cell() {
         let mut rng = SplitMix64::new(11);
         for &(nu, nv) in &[(1, 1), (7, 3), (64, 32), (5, 17), (300, 1)] {
-            let f = random_grid(&mut rng, nu * nv, 0.3);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.3);
             let alias = AliasTable2D::new(&f, nu);
             let inversion = Distribution2D::new(&f, nu);
             assert_eq!(alias.integral(), inversion.integral());
@@ -535,7 +536,7 @@ mod tests {
     fn table_reproduces_cell_probabilities_exactly() {
         // Σ over slots of the mass each gives to a cell must equal f/Σf.
         let mut rng = SplitMix64::new(5);
-        let f = random_grid(&mut rng, 999, 0.25);
+        let f = test_support::random_grid(&mut rng, 999, 0.25);
         let t = AliasTable2D::new(&f, 37);
         let n = f.len() as f64;
         let mut mass = vec![0.0f64; f.len()];
@@ -564,7 +565,7 @@ mod tests {
             .iter()
             .enumerate()
         {
-            let f = random_grid(&mut rng, nu * nv, 0.2);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.2);
             let t = AliasTable2D::new(&f, nu);
             let n = 400_000;
             let counts = cell_counts(&t, n, 3 + seed as u64);
@@ -585,7 +586,7 @@ mod tests {
         // sampled one: sample a table built from f but test against f with one
         // cell's weight raised by 10 % (α = 1e-3, N = 400 000, seed 8).
         let mut rng = SplitMix64::new(1);
-        let f = random_grid(&mut rng, 128, 0.0);
+        let f = test_support::random_grid(&mut rng, 128, 0.0);
         let t = AliasTable2D::new(&f, 16);
         let n = 400_000;
         let counts = cell_counts(&t, n, 8);
@@ -676,7 +677,7 @@ mod tests {
     fn timing_against_inversion() {
         for (nu, nv) in [(4096, 2048), (64, 32)] {
             let mut rng = SplitMix64::new(1);
-            let f = random_grid(&mut rng, nu * nv, 0.0);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.0);
             let start = std::time::Instant::now();
             let alias = AliasTable2D::new(&f, nu);
             let build_alias = start.elapsed();

@@ -398,23 +398,6 @@ mod tests {
     /// Significance level of every chi-square test here.
     const ALPHA: f64 = 1e-3;
 
-    /// Random values over four decades, a `zero_fraction` of them 0, never all 0.
-    fn random_grid(rng: &mut SplitMix64, n: usize, zero_fraction: f64) -> Vec<f32> {
-        let mut f: Vec<f32> = (0..n)
-            .map(|_| {
-                if rng.next_f64() < zero_fraction {
-                    0.0
-                } else {
-                    10f32.powf(4.0 * rng.next_f32() - 2.0)
-                }
-            })
-            .collect();
-        if f.iter().all(|&x| x == 0.0) {
-            f[n / 2] = 1.0;
-        }
-        f
-    }
-
     const SHAPES: [(usize, usize); 9] = [
         (1, 1),
         (2, 1),
@@ -475,7 +458,7 @@ mod tests {
     fn pdf_matches_inversion_sampler_cell_by_cell() {
         let mut rng = SplitMix64::new(21);
         for &(nu, nv) in &SHAPES {
-            let f = random_grid(&mut rng, nu * nv, 0.3);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.3);
             let h = Hierarchical2D::new(&f, nu);
             let inversion = Distribution2D::new(&f, nu);
             assert_eq!(h.integral(), inversion.integral());
@@ -513,7 +496,7 @@ mod tests {
         // α = 1e-3, N = 300 000 per shape, ξ = xi_2d(40 + shape index, k).
         let mut rng = SplitMix64::new(17);
         for (i, &(nu, nv)) in SHAPES.iter().enumerate() {
-            let f = random_grid(&mut rng, nu * nv, 0.2);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.2);
             let h = Hierarchical2D::new(&f, nu);
             let n = 300_000;
             let counts = cell_counts(&h, (0..n).map(|k| xi_2d(40 + i as u64, k)));
@@ -527,7 +510,7 @@ mod tests {
         // Samples of f tested against f with one cell 10 % heavier (α = 1e-3,
         // N = 300 000, seed 9): the harness must reject.
         let mut rng = SplitMix64::new(2);
-        let f = random_grid(&mut rng, 96, 0.0);
+        let f = test_support::random_grid(&mut rng, 96, 0.0);
         let h = Hierarchical2D::new(&f, 12);
         let n = 300_000;
         let counts = cell_counts(&h, (0..n).map(|k| xi_2d(9, k)));
@@ -564,7 +547,7 @@ mod tests {
     fn invert_undoes_sample() {
         let mut rng = SplitMix64::new(8);
         for &(nu, nv) in &SHAPES {
-            let f = random_grid(&mut rng, nu * nv, 0.3);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.3);
             let h = Hierarchical2D::new(&f, nu);
             for k in 0..2000 {
                 let xi = xi_2d(6, k);
@@ -576,7 +559,7 @@ mod tests {
         }
         // A mismatched inverse (another function's pyramid) is caught by the same
         // check: the worst error is far above the tolerance.
-        let f = random_grid(&mut rng, 64, 0.0);
+        let f = test_support::random_grid(&mut rng, 64, 0.0);
         let (h, other) = (
             Hierarchical2D::new(&f, 8),
             Hierarchical2D::new(&[1.0; 64], 8),
@@ -597,7 +580,7 @@ mod tests {
         // columns differ, so u is non-decreasing in ξ0; likewise v in ξ1. (This is
         // what keeps stratified points stratified.)
         let mut rng = SplitMix64::new(30);
-        let f = random_grid(&mut rng, 16 * 12, 0.3);
+        let f = test_support::random_grid(&mut rng, 16 * 12, 0.3);
         let h = Hierarchical2D::new(&f, 16);
         for j in 0..25 {
             let fixed = (j as f32 + 0.5) / 25.0;
@@ -747,7 +730,7 @@ mod tests {
     fn timing_against_inversion() {
         for (nu, nv) in [(4096, 2048), (64, 32)] {
             let mut rng = SplitMix64::new(1);
-            let f = random_grid(&mut rng, nu * nv, 0.0);
+            let f = test_support::random_grid(&mut rng, nu * nv, 0.0);
             let start = std::time::Instant::now();
             let h = Hierarchical2D::new(&f, nu);
             let build = start.elapsed();
