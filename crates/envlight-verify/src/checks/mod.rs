@@ -1,0 +1,8 @@
+//! The checks of DESIGN.md §5 and §6a, one module each.
+
+pub mod black;
+pub mod chi_square;
+pub mod consistency;
+pub mod normalisation;
+pub mod support;
+pub mod unbiasedness;

@@ -1,0 +1,154 @@
+//! What the harness checks: a sampler of directions and its cell grid.
+
+use crate::param::Param;
+use envlight::{EnvironmentLight, Rotation, Vec3};
+
+/// One direction drawn by a sampler.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SphereSample {
+    /// World-space unit direction.
+    pub direction: Vec3,
+    /// Its solid-angle density, per steradian.
+    pub pdf: f32,
+    /// Radiance arriving from it, as the sampler reports it.
+    pub radiance: [f32; 3],
+}
+
+/// The cell grid of a sampler, in the frame that `to_world` carries to world space:
+/// the lines along which its pdf (and radiance) may be discontinuous, or kinked
+/// (at the cells' centre lines, for bilinear reconstructions). The harness aligns
+/// quadrature, chi-square bins, support probes and the consistency checks' edge
+/// exemption with it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Grid {
+    /// `width × height` cells of the equirectangular map (DESIGN.md §2): `φ = 2π u`,
+    /// `θ = π v` ([`direction_at`]); u wraps, and the poles are singular.
+    Equirect {
+        /// Cells along u (φ).
+        width: usize,
+        /// Cells along v (θ).
+        height: usize,
+        /// Grid frame to world.
+        to_world: Rotation,
+    },
+    /// `size × size` cells of the equal-area octahedral square
+    /// ([`square_to_sphere`]): `dω = 4π du dv` everywhere, no singular point; the
+    /// square's boundary is folded onto itself.
+    EqualArea {
+        /// Cells along u and along v.
+        size: usize,
+        /// Grid frame to world.
+        to_world: Rotation,
+    },
+}
+
+impl Grid {
+    /// Grid frame to world.
+    pub fn to_world(self) -> Rotation {
+        match self {
+            Grid::Equirect { to_world, .. } | Grid::EqualArea { to_world, .. } => to_world,
+        }
+    }
+
+    /// Cells along u and v.
+    pub fn cells(self) -> [usize; 2] {
+        match self {
+            Grid::Equirect { width, height, .. } => [width, height],
+            Grid::EqualArea { size, .. } => [size, size],
+        }
+    }
+
+    /// The parameterisation the cells live in.
+    pub fn param(self) -> Param {
+        match self {
+            Grid::Equirect { .. } => Param::Equirect,
+            Grid::EqualArea { .. } => Param::EqualArea,
+        }
+    }
+}
+
+/// A sampler of directions with a density, the thing DESIGN.md §5 constrains.
+/// Adding a sampler to a test table means implementing this (usually by
+/// delegation) and adding one line to the table.
+pub trait SphereSampler: Sync {
+    /// What the sampler is, for the printed report.
+    fn name(&self) -> String;
+    /// Draws a direction for `ξ ∈ [0,1)²`, or `None` (no light, or a null set).
+    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample>;
+    /// Solid-angle density of a world direction, per steradian.
+    fn pdf(&self, direction: Vec3) -> f32;
+    /// The `ξ` that `sample` maps to `direction`, when the sampler can invert.
+    fn invert(&self, direction: Vec3) -> Option<[f32; 2]>;
+    /// Radiance arriving from a world direction.
+    fn radiance(&self, direction: Vec3) -> [f32; 3];
+    /// The sampler's own claim of `∫ Y(L) dω`.
+    fn integral_luminance(&self) -> f64;
+    /// The cell grid the pdf is piecewise constant (or bilinear) on, if any (see
+    /// [`Grid`]).
+    fn grid(&self) -> Option<Grid> {
+        None
+    }
+    /// The sampler's own figure for `(∫Y)² / ∫(Y²/p)`, if it reports one.
+    fn reported_efficiency(&self) -> Option<f64> {
+        None
+    }
+}
+
+impl SphereSampler for EnvironmentLight {
+    fn name(&self) -> String {
+        let o = self.options();
+        let rotated = if o.rotation.is_identity() {
+            ""
+        } else {
+            ", rotated"
+        };
+        let mapping = match self.mapping() {
+            envlight::light::Mapping::Equirectangular => "",
+            envlight::light::Mapping::EqualArea => " equal-area",
+        };
+        format!(
+            "EnvironmentLight {}x{}{mapping} {:?}{rotated}",
+            self.image().width(),
+            self.image().height(),
+            o.lookup
+        )
+    }
+    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
+        EnvironmentLight::sample(self, xi).map(|s| SphereSample {
+            direction: s.direction,
+            pdf: s.pdf,
+            radiance: s.radiance,
+        })
+    }
+    fn pdf(&self, direction: Vec3) -> f32 {
+        EnvironmentLight::pdf(self, direction)
+    }
+    fn invert(&self, direction: Vec3) -> Option<[f32; 2]> {
+        EnvironmentLight::invert(self, direction)
+    }
+    fn radiance(&self, direction: Vec3) -> [f32; 3] {
+        EnvironmentLight::radiance(self, direction)
+    }
+    fn integral_luminance(&self) -> f64 {
+        EnvironmentLight::integral_luminance(self)
+    }
+    fn grid(&self) -> Option<Grid> {
+        // The pdf lives on the texels of the light's own image, in its own mapping
+        // (for an equal-area light, the resampled square).
+        let to_world = self.options().rotation;
+        Some(match self.mapping() {
+            envlight::light::Mapping::Equirectangular => Grid::Equirect {
+                width: self.image().width(),
+                height: self.image().height(),
+                to_world,
+            },
+            envlight::light::Mapping::EqualArea => Grid::EqualArea {
+                size: self.image().width(),
+                to_world,
+            },
+        })
+    }
+    fn reported_efficiency(&self) -> Option<f64> {
+        Some(self.efficiency())
+    }
+}

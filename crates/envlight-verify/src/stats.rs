@@ -1,0 +1,91 @@
+//! Deterministic parallel sampling and the small statistics the checks share.
+
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+
+const CHUNK: usize = 1 << 15;
+
+/// Runs `body(acc, ξ)` for `n` points `ξ` from PCG streams fixed by `seed`, in
+/// parallel chunks with one accumulator each; accumulators come back in order.
+pub fn over_samples<A: Send>(
+    n: usize,
+    seed: u64,
+    init: impl Fn() -> A + Sync,
+    body: impl Fn(&mut A, [f32; 2]) + Sync,
+) -> Vec<A> {
+    (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let stream = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ (c as u64).wrapping_mul(0xd1b5_4a32_d192_ed03);
+            let mut rng = Pcg64Mcg::seed_from_u64(stream);
+            let mut acc = init();
+            for _ in 0..CHUNK.min(n - c * CHUNK) {
+                let xi = [rng.random::<f32>(), rng.random::<f32>()];
+                body(&mut acc, xi);
+            }
+            acc
+        })
+        .collect()
+}
+
+/// Mean and variance accumulated by Welford's method and merged by Chan's formula
+/// (stable for the huge-dynamic-range maps).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Moments {
+    /// Number of values.
+    pub n: f64,
+    /// Their mean.
+    pub mean: f64,
+    /// Sum of squared deviations from the mean.
+    pub m2: f64,
+}
+
+impl Moments {
+    /// Adds one value.
+    pub fn push(&mut self, x: f64) {
+        self.n += 1.0;
+        let delta = x - self.mean;
+        self.mean += delta / self.n;
+        self.m2 += delta * (x - self.mean);
+    }
+    /// Combines two accumulators.
+    pub fn merge(self, o: Self) -> Self {
+        if o.n == 0.0 {
+            return self;
+        }
+        if self.n == 0.0 {
+            return o;
+        }
+        let n = self.n + o.n;
+        let delta = o.mean - self.mean;
+        Self {
+            n,
+            mean: self.mean + delta * o.n / n,
+            m2: self.m2 + o.m2 + delta * delta * self.n * o.n / n,
+        }
+    }
+    /// Standard error of the mean.
+    pub fn std_err(&self) -> f64 {
+        if self.n > 1.0 {
+            (self.m2 / (self.n - 1.0) / self.n).sqrt()
+        } else {
+            0.0
+        }
+    }
+    /// Mean of the squares.
+    pub fn mean_square(&self) -> f64 {
+        self.m2 / self.n + self.mean * self.mean
+    }
+}
+
+/// `x ≤ limit`, false when either is NaN: checks written `!fits(error, tolerance)`
+/// count a NaN error as a failure.
+pub fn fits(x: f64, limit: f64) -> bool {
+    x <= limit
+}
+
+pub(crate) fn finite_rgb(rgb: [f32; 3]) -> bool {
+    rgb.iter().all(|c| c.is_finite() && *c >= 0.0)
+}
