@@ -78,6 +78,13 @@ impl Progress {
         }
     }
 
+    /// Replaces the bar's message (the step under way).
+    pub fn set_message(&self, message: &str) {
+        if self.visible {
+            self.bar.set_message(message.to_string());
+        }
+    }
+
     /// Removes the bar from the terminal.
     pub fn finish(&self) {
         if self.visible {

@@ -53,11 +53,11 @@ pub use checks::unbiasedness::{
 };
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};
-pub use quadrature::{gauss_legendre, Quadrature};
+pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
 pub use stats::{fits, over_samples, Moments};
-pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report};
+pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report, CHECKS};
 
 /// Significance level of every chi-square test: a correct sampler is rejected with
 /// probability 1e-3 per case (but seeds are fixed, so a passing case stays passing).

@@ -137,115 +137,123 @@ impl Quadrature {
             .collect()
     }
 
-    /// Calls `f(world direction, dω weight, near pole)` at every point of row `j`
-    /// and sums the results per cell; "near pole" is [`Param::near_pole`].
+    /// The points of row `j`, cell by cell: world direction, `dω` weight, and
+    /// whether it is near a pole ([`Param::near_pole`]); `order²` per cell.
+    fn row_points(&self, j: usize, phis: &[(f64, f64)]) -> Points {
+        let (t, w) = gauss_legendre(self.order);
+        let (du, dv) = (1.0 / self.nu as f64, 1.0 / self.nv as f64);
+        let rotate = !self.to_world.is_identity();
+        let world = |local: Vec3| {
+            if rotate {
+                self.to_world.apply(local)
+            } else {
+                local
+            }
+        };
+        let per_cell = t.len() * t.len();
+        let mut p = Points::with_capacity(self.nu * per_cell);
+        match self.param {
+            Param::Equirect => {
+                for (cell_phis, _) in phis.chunks_exact(t.len()).zip(0..self.nu) {
+                    for (&tv, &wv) in t.iter().zip(w) {
+                        let v = (j as f64 + tv) * dv;
+                        let (st, ct) = (PI * v).sin_cos();
+                        let weight_v = wv * st * PI * dv * 2.0 * PI * du;
+                        for (&(sp, cp), &wu) in cell_phis.iter().zip(w) {
+                            let local = Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32);
+                            p.push(world(local), weight_v * wu, st < POLE_BAND_SIN);
+                        }
+                    }
+                }
+            }
+            Param::EqualArea => {
+                let area = 4.0 * PI * du * dv;
+                for i in 0..self.nu {
+                    for (&tv, &wv) in t.iter().zip(w) {
+                        let v = (j as f64 + tv) * dv;
+                        for (&tu, &wu) in t.iter().zip(w) {
+                            let local = to_f32(square_to_sphere((i as f64 + tu) * du, v));
+                            p.push(world(local), area * wu * wv, false);
+                        }
+                    }
+                }
+            }
+        }
+        p
+    }
+
+    /// Per-cell sums of `f(point)` over row `j`, the sampler's values at the
+    /// points looked up in batches (only those `needs` asks for).
     fn row<const K: usize>(
         &self,
         j: usize,
         phis: &[(f64, f64)],
-        f: &(impl Fn(Vec3, f64, bool) -> [f64; K] + Sync),
+        s: &dyn SphereSampler,
+        needs: Needs,
+        f: &(impl Fn(&Point) -> [f64; K] + Sync),
     ) -> Vec<[f64; K]> {
-        match self.param {
-            Param::Equirect => self.row_equirect(j, phis, f),
-            Param::EqualArea => self.row_equal_area(j, f),
+        let points = self.row_points(j, phis);
+        let n = points.directions.len();
+        let mut radiance = vec![[0.0f32; 3]; if needs.radiance { n } else { 0 }];
+        let mut pdf = vec![0.0f32; if needs.pdf { n } else { 0 }];
+        if needs.radiance {
+            s.radiance_batch(&points.directions, &mut radiance);
         }
-    }
-
-    fn row_equirect<const K: usize>(
-        &self,
-        j: usize,
-        phis: &[(f64, f64)],
-        f: &(impl Fn(Vec3, f64, bool) -> [f64; K] + Sync),
-    ) -> Vec<[f64; K]> {
-        let (t, w) = gauss_legendre(self.order);
-        let (du, dv) = (1.0 / self.nu as f64, 1.0 / self.nv as f64);
-        let rotate = !self.to_world.is_identity();
+        if needs.pdf {
+            s.pdf_batch(&points.directions, &mut pdf);
+        }
+        let per_cell = n / self.nu;
         let mut out = vec![[0.0; K]; self.nu];
-        for (&tv, &wv) in t.iter().zip(w) {
-            let v = (j as f64 + tv) * dv;
-            let (st, ct) = (PI * v).sin_cos();
-            let near_pole = st < POLE_BAND_SIN;
-            let weight_v = wv * st * PI * dv * 2.0 * PI * du;
-            for (cell, cell_phis) in out.iter_mut().zip(phis.chunks_exact(t.len())) {
-                for (&(sp, cp), &wu) in cell_phis.iter().zip(w) {
-                    let local = Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32);
-                    let d = if rotate {
-                        self.to_world.apply(local)
-                    } else {
-                        local
-                    };
-                    let r = f(d, weight_v * wu, near_pole);
-                    for k in 0..K {
-                        cell[k] += r[k];
-                    }
+        for (k, cell) in out.iter_mut().enumerate() {
+            for q in k * per_cell..(k + 1) * per_cell {
+                let r = f(&Point {
+                    direction: points.directions[q],
+                    weight: points.weights[q],
+                    near_pole: points.near_pole[q],
+                    radiance: radiance.get(q).copied().unwrap_or_default(),
+                    pdf: pdf.get(q).copied().unwrap_or_default(),
+                });
+                for k in 0..K {
+                    cell[k] += r[k];
                 }
             }
         }
         out
     }
 
-    fn row_equal_area<const K: usize>(
-        &self,
-        j: usize,
-        f: &(impl Fn(Vec3, f64, bool) -> [f64; K] + Sync),
-    ) -> Vec<[f64; K]> {
-        let (t, w) = gauss_legendre(self.order);
-        let (du, dv) = (1.0 / self.nu as f64, 1.0 / self.nv as f64);
-        let area = 4.0 * PI * du * dv;
-        let rotate = !self.to_world.is_identity();
-        let mut out = vec![[0.0; K]; self.nu];
-        for (&tv, &wv) in t.iter().zip(w) {
-            let v = (j as f64 + tv) * dv;
-            for (i, cell) in out.iter_mut().enumerate() {
-                for (&tu, &wu) in t.iter().zip(w) {
-                    let local = to_f32(square_to_sphere((i as f64 + tu) * du, v));
-                    let d = if rotate {
-                        self.to_world.apply(local)
-                    } else {
-                        local
-                    };
-                    let r = f(d, area * wu * wv, false);
-                    for k in 0..K {
-                        cell[k] += r[k];
-                    }
-                }
-            }
-        }
-        out
-    }
-
-    /// Per-cell sums of `f(ω, dω, near pole)`, row-major (`nv` rows of `nu`).
+    /// Per-cell sums of `f(point)`, row-major (`nv` rows of `nu`).
     pub fn cells<const K: usize>(
         &self,
-        f: impl Fn(Vec3, f64, bool) -> [f64; K] + Sync,
+        s: &dyn SphereSampler,
+        needs: Needs,
+        f: impl Fn(&Point) -> [f64; K] + Sync,
     ) -> Vec<[f64; K]> {
         let phis = self.phi_table();
         (0..self.nv)
             .into_par_iter()
-            .flat_map_iter(|j| self.row(j, &phis, &f))
+            .flat_map_iter(|j| self.row(j, &phis, s, needs, &f))
             .collect()
     }
 
-    /// `Σ f(ω, dω, near pole)` over all points (summed per row, then rows in order).
-    pub fn sum<const K: usize>(&self, f: impl Fn(Vec3, f64, bool) -> [f64; K] + Sync) -> [f64; K] {
+    /// `Σ f(point)` over all points (summed per row, then rows in order).
+    pub fn sum<const K: usize>(
+        &self,
+        s: &dyn SphereSampler,
+        needs: Needs,
+        f: impl Fn(&Point) -> [f64; K] + Sync,
+    ) -> [f64; K] {
         let phis = self.phi_table();
-        let rows: Vec<[f64; K]> = (0..self.nv)
-            .into_par_iter()
-            .map(|j| {
-                self.row(j, &phis, &f).iter().fold([0.0; K], |mut a, c| {
-                    for k in 0..K {
-                        a[k] += c[k];
-                    }
-                    a
-                })
-            })
-            .collect();
-        rows.iter().fold([0.0; K], |mut a, r| {
+        let add = |mut a: [f64; K], c: &[f64; K]| {
             for k in 0..K {
-                a[k] += r[k];
+                a[k] += c[k];
             }
             a
-        })
+        };
+        let rows: Vec<[f64; K]> = (0..self.nv)
+            .into_par_iter()
+            .map(|j| self.row(j, &phis, s, needs, &f).iter().fold([0.0; K], add))
+            .collect();
+        rows.iter().fold([0.0; K], add)
     }
 
     pub(crate) fn describe(&self) -> String {
@@ -256,5 +264,65 @@ impl Quadrature {
             self.param.describe(),
             self.order
         )
+    }
+}
+
+/// Which of the sampler's values [`Quadrature::sum`] and [`Quadrature::cells`]
+/// look up at the points (the others read as 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Needs {
+    /// `radiance(ω)`.
+    pub radiance: bool,
+    /// `pdf(ω)`.
+    pub pdf: bool,
+}
+
+impl Needs {
+    /// The pdf alone.
+    pub const PDF: Needs = Needs {
+        radiance: false,
+        pdf: true,
+    };
+    /// Radiance and pdf.
+    pub const BOTH: Needs = Needs {
+        radiance: true,
+        pdf: true,
+    };
+}
+
+/// One quadrature point with the sampler's values there.
+#[derive(Debug, Clone, Copy)]
+pub struct Point {
+    /// World direction.
+    pub direction: Vec3,
+    /// `dω` weight.
+    pub weight: f64,
+    /// Within the pole band of the lat-long map.
+    pub near_pole: bool,
+    /// `radiance(ω)` (when asked for).
+    pub radiance: [f32; 3],
+    /// `pdf(ω)` (when asked for).
+    pub pdf: f32,
+}
+
+/// A row's points, as arrays (the directions go to the batch queries whole).
+struct Points {
+    directions: Vec<Vec3>,
+    weights: Vec<f64>,
+    near_pole: Vec<bool>,
+}
+
+impl Points {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            directions: Vec::with_capacity(n),
+            weights: Vec::with_capacity(n),
+            near_pole: Vec::with_capacity(n),
+        }
+    }
+    fn push(&mut self, d: Vec3, w: f64, near_pole: bool) {
+        self.directions.push(d);
+        self.weights.push(w);
+        self.near_pole.push(near_pole);
     }
 }

@@ -92,6 +92,19 @@ pub trait SphereSampler: Sync {
     fn reported_efficiency(&self) -> Option<f64> {
         None
     }
+    /// [`Self::pdf`] of every direction; a sampler with a faster batch query
+    /// overrides this (its results must equal the single calls').
+    fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
+        for (o, &d) in out.iter_mut().zip(directions) {
+            *o = self.pdf(d);
+        }
+    }
+    /// [`Self::radiance`] of every direction (see [`Self::pdf_batch`]).
+    fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
+        for (o, &d) in out.iter_mut().zip(directions) {
+            *o = self.radiance(d);
+        }
+    }
 }
 
 impl SphereSampler for EnvironmentLight {
@@ -150,5 +163,11 @@ impl SphereSampler for EnvironmentLight {
     }
     fn reported_efficiency(&self) -> Option<f64> {
         Some(self.efficiency())
+    }
+    fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
+        EnvironmentLight::pdf_batch(self, directions, out)
+    }
+    fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
+        EnvironmentLight::radiance_batch(self, directions, out)
     }
 }

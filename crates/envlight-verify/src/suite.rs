@@ -14,6 +14,19 @@ use crate::PDF_CONSISTENCY_TOLERANCE;
 use envlight::Vec3;
 use std::time::Instant;
 
+/// The rows of [`Report::rows`], in order, for the integrand `Y` (the front ends
+/// print them as skipped when a map is all black).
+pub const CHECKS: [&str; 8] = [
+    "normalisation",
+    "pdf consistency",
+    "invert",
+    "chi-square",
+    "unbiased (Y)",
+    "unbiased (cos)",
+    "support",
+    "efficiency",
+];
+
 /// Which cosine lobes [`unbiasedness`] tests on top of the integrand.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lobes {
@@ -181,9 +194,10 @@ impl Report {
             .collect()
     }
 
-    /// The table of `envlight verify`: normalisation, pdf consistency, invert,
-    /// chi-square, the unbiasedness of the integrand and of its first lobe,
-    /// support and efficiency. `sampler` names the sampler for the invert row.
+    /// The table of `envlight verify` ([`CHECKS`]): normalisation, pdf
+    /// consistency, invert, chi-square, the unbiasedness of the integrand (named
+    /// by its label) and of the integrand times the first lobe (`cos`), support
+    /// and efficiency. `sampler` names the sampler for the invert row.
     pub fn rows(&self, sampler: &str) -> Vec<Row> {
         let mut rows = vec![
             self.normalisation.row(false),
@@ -192,8 +206,14 @@ impl Report {
             self.chi_square.row(),
         ];
         if let Some(u) = &self.unbiasedness {
-            let mut rows_u = u.estimates.iter().zip(["Y", "cos"]);
-            rows.extend(rows_u.by_ref().map(|(e, name)| e.row(name, u.samples)));
+            let label = u.estimates.first().map_or("", |e| e.label.as_str());
+            let names = [label, "cos"];
+            rows.extend(
+                u.estimates
+                    .iter()
+                    .zip(names)
+                    .map(|(e, name)| e.row(name, u.samples)),
+            );
         }
         if let Some(s) = &self.support {
             rows.push(s.row());

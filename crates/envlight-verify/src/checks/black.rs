@@ -1,6 +1,6 @@
 //! Degenerate input: what a sampler of an all-black light must do.
 
-use crate::quadrature::Quadrature;
+use crate::quadrature::{Needs, Quadrature};
 use crate::sampler::SphereSampler;
 use crate::stats::{finite_rgb, over_samples};
 use std::fmt;
@@ -61,10 +61,12 @@ pub fn black(s: &dyn SphereSampler, n: usize, seed: u64) -> Black {
     .iter()
     .sum();
     let q = Quadrature::for_sampler(s, 1, [64, 32], 1 << 20, 2);
-    let [nonzero, bad, points] = q.sum(|d, _, _| {
-        let p = s.pdf(d);
-        let l = s.radiance(d);
-        [(p != 0.0) as u8 as f64, (!finite_rgb(l)) as u8 as f64, 1.0]
+    let [nonzero, bad, points] = q.sum(s, Needs::BOTH, |pt| {
+        [
+            (pt.pdf != 0.0) as u8 as f64,
+            (!finite_rgb(pt.radiance)) as u8 as f64,
+            1.0,
+        ]
     });
     Black {
         samples: n,

@@ -1,7 +1,7 @@
 //! 3. Chi-square goodness of fit of the samples to `pdf()`.
 
 use crate::param::Frame;
-use crate::quadrature::Quadrature;
+use crate::quadrature::{Needs, Quadrature};
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;
 use crate::stats::{fits, over_samples};
@@ -143,10 +143,9 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
         nv: fine_v * split,
         order: 2,
     };
-    let quadrature_cells = q.cells(|d, w, _| {
-        let p = s.pdf(d);
-        [if p.is_finite() && p > 0.0 {
-            p as f64 * w
+    let quadrature_cells = q.cells(s, Needs::PDF, |pt| {
+        [if pt.pdf.is_finite() && pt.pdf > 0.0 {
+            pt.pdf as f64 * pt.weight
         } else {
             0.0
         }]

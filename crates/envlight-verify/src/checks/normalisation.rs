@@ -1,6 +1,6 @@
 //! 1. Normalisation: `∫ p dω = 1`.
 
-use crate::quadrature::Quadrature;
+use crate::quadrature::{Needs, Quadrature};
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;
 use crate::NORMALISATION_TOLERANCE;
@@ -77,10 +77,10 @@ impl fmt::Display for Normalisation {
 /// misplacing the `1/sin θ` (or `1/4π`) of the solid-angle pdf shows up at O(1).
 pub fn normalisation(s: &dyn SphereSampler) -> Normalisation {
     let q = Quadrature::for_sampler(s, 1, [256, 128], 4 << 20, 2);
-    let [integral, bad] = q.sum(|d, w, _| {
-        let p = s.pdf(d);
+    let [integral, bad] = q.sum(s, Needs::PDF, |pt| {
+        let p = pt.pdf;
         if p.is_finite() && p >= 0.0 {
-            [p as f64 * w, 0.0]
+            [p as f64 * pt.weight, 0.0]
         } else {
             [0.0, 1.0]
         }

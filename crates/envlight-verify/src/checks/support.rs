@@ -87,29 +87,39 @@ pub fn support(s: &dyn SphereSampler, integrand: &Integrand) -> Support {
         .into_par_iter()
         .map(|j| {
             let mut r = Support::default();
+            // The row's probes off the poles, their radiance and pdf in batches.
+            let mut at = Vec::with_capacity(w * probes.len());
+            let mut directions = Vec::with_capacity(w * probes.len());
             for i in 0..w {
-                for p in &probes {
+                for (k, p) in probes.iter().enumerate() {
                     let (u, v) = ((i as f64 + p[0]) / w as f64, (j as f64 + p[1]) / h as f64);
-                    let d = frame.world_at(u, v);
                     r.probes += 1;
                     if frame.param.near_pole([u, v]) {
                         r.near_pole += 1;
-                        continue;
+                    } else {
+                        at.push((i, k));
+                        directions.push(frame.world_at(u, v));
                     }
-                    let l = s.radiance(d);
-                    if l.iter().any(|&c| c > 0.0) && integrand.factor(d) > 0.0 {
-                        r.lit += 1;
-                        let pdf = s.pdf(d);
-                        if !(pdf > 0.0 && pdf.is_finite()) {
-                            r.violations += 1;
-                            if r.first.is_none() {
-                                r.first = Some(format!(
-                                    "cell ({i}, {j}) of {w}x{h} at ({:.2}, {:.2}): L={l:?}, pdf={pdf:e}",
-                                    p[0], p[1]
-                                ));
-                            }
-                        }
-                    }
+                }
+            }
+            let mut radiance = vec![[0.0f32; 3]; directions.len()];
+            let mut pdf = vec![0.0f32; directions.len()];
+            s.radiance_batch(&directions, &mut radiance);
+            s.pdf_batch(&directions, &mut pdf);
+            for (q, &(i, k)) in at.iter().enumerate() {
+                let (l, p, d) = (radiance[q], pdf[q], directions[q]);
+                if !(l.iter().any(|&c| c > 0.0) && integrand.factor(d) > 0.0) {
+                    continue;
+                }
+                r.lit += 1;
+                if !(p > 0.0 && p.is_finite()) {
+                    r.violations += 1;
+                    r.first.get_or_insert_with(|| {
+                        format!(
+                            "cell ({i}, {j}) of {w}x{h} at ({:.2}, {:.2}): L={l:?}, pdf={p:e}",
+                            probes[k][0], probes[k][1]
+                        )
+                    });
                 }
             }
             r

@@ -2,7 +2,7 @@
 
 use crate::integrand::Integrand;
 use crate::param::Frame;
-use crate::quadrature::Quadrature;
+use crate::quadrature::{Needs, Point, Quadrature};
 use crate::report::{sig, Row, Verdict};
 use crate::sampler::SphereSampler;
 use crate::stats::{fits, over_samples, Moments};
@@ -270,18 +270,18 @@ fn reference_rule(s: &dyn SphereSampler) -> Quadrature {
     Quadrature::for_sampler(s, 2, [256, 128], 1 << 20, if large { 2 } else { 3 })
 }
 
-/// The `g²/p` term of the efficiency at a point of weight `w` (+∞ where `g > 0`
+/// The `g²/p` term of the efficiency at a quadrature point (+∞ where `g > 0`
 /// and `p = 0`). It leaves out the lat-long map's pole caps (sin θ < POLE_BAND_SIN,
 /// 5e-9 of the sphere), where the density diverges and an f32 pdf may legitimately
 /// be 0; `g/p` is bounded around them, so the caps change the efficiency by about
 /// their share of `∫g`. (The equal-area square has none.)
-fn second_moment(s: &dyn SphereSampler, d: Vec3, g: f64, w: f64, near_pole: bool) -> f64 {
-    if g <= 0.0 || near_pole {
+fn second_moment(pt: &Point, g: f64) -> f64 {
+    if g <= 0.0 || pt.near_pole {
         return 0.0;
     }
-    let p = s.pdf(d) as f64;
+    let p = pt.pdf as f64;
     if p > 0.0 {
-        g * g / p * w
+        g * g / p * pt.weight
     } else {
         f64::INFINITY
     }
@@ -313,9 +313,9 @@ pub struct Efficiency {
 /// of [`unbiasedness`].
 pub fn efficiency(s: &dyn SphereSampler, integrand: &Integrand) -> Efficiency {
     let q = reference_rule(s);
-    let [integral, second] = q.sum(|d, w, pole| {
-        let g = integrand.value(s.radiance(d), d);
-        [g * w, second_moment(s, d, g, w, pole)]
+    let [integral, second] = q.sum(s, Needs::BOTH, |pt| {
+        let g = integrand.value(pt.radiance, pt.direction);
+        [g * pt.weight, second_moment(pt, g)]
     });
     Efficiency {
         integral,
@@ -354,11 +354,15 @@ pub fn unbiasedness(
         ..q3
     };
     let quadrature = |q: &Quadrature, with_efficiency: bool| {
-        q.sum(|d, w, pole| {
-            let g = integrand.value(s.radiance(d), d);
-            let mut r = values(g, d).map(|x| x * w);
+        let needs = Needs {
+            radiance: true,
+            pdf: with_efficiency,
+        };
+        q.sum(s, needs, |pt| {
+            let g = integrand.value(pt.radiance, pt.direction);
+            let mut r = values(g, pt.direction).map(|x| x * pt.weight);
             if with_efficiency {
-                r[K - 1] = second_moment(s, d, g, w, pole);
+                r[K - 1] = second_moment(pt, g);
             }
             r
         })
