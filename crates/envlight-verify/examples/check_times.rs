@@ -4,7 +4,7 @@
 
 use envlight::load::{load, LoadOptions};
 use envlight::{EnvironmentLight, LightOptions};
-use envlight_verify::{run, Config, Integrand, Lobes};
+use envlight_verify::{run, Config, Integrand, Lobes, Reference};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -17,6 +17,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         Config {
             lobes: Lobes::Zenith,
+            reference: Reference::Midpoint,
             ..Config::with_samples(200_000, 0)
         }
     };

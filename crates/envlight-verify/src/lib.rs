@@ -49,7 +49,8 @@ pub use checks::consistency::{consistency, Consistency};
 pub use checks::normalisation::{normalisation, Normalisation};
 pub use checks::support::{support, Support};
 pub use checks::unbiasedness::{
-    efficiency, lobe_normals, unbiasedness, Efficiency, Estimate, Unbiasedness, MASS_RESOLUTION,
+    efficiency, lobe_normals, unbiasedness, Efficiency, Estimate, Reference, Unbiasedness,
+    MASS_RESOLUTION,
 };
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};

@@ -206,6 +206,22 @@ impl Frame {
     pub(crate) fn world_at(&self, u: f64, v: f64) -> Vec3 {
         self.to_world.apply(to_f32(self.param.direction(u, v)))
     }
+    /// The world directions at `(u, v)` for every `u` in `us`, given `u_trig`, the
+    /// `(sin 2πu, cos 2πu)` of each (used on the lat-long map only; computed once
+    /// for many rows, it saves the trigonometry of every point).
+    pub(crate) fn world_row(&self, us: &[f64], u_trig: &[(f64, f64)], v: f64, out: &mut Vec<Vec3>) {
+        match self.param {
+            Param::Equirect => {
+                let (st, ct) = (PI * v).sin_cos();
+                out.extend(
+                    u_trig
+                        .iter()
+                        .map(|&(sp, cp)| self.to_world.apply(to_f32([st * cp, st * sp, ct]))),
+                );
+            }
+            Param::EqualArea => out.extend(us.iter().map(|&u| self.world_at(u, v))),
+        }
+    }
     pub(crate) fn local_uv(&self, world: Vec3) -> [f64; 2] {
         self.param.uv(to_f64(self.to_local.apply(world)))
     }

@@ -154,11 +154,16 @@ impl Quadrature {
         let mut p = Points::with_capacity(self.nu * per_cell);
         match self.param {
             Param::Equirect => {
-                for (cell_phis, _) in phis.chunks_exact(t.len()).zip(0..self.nu) {
-                    for (&tv, &wv) in t.iter().zip(w) {
-                        let v = (j as f64 + tv) * dv;
-                        let (st, ct) = (PI * v).sin_cos();
-                        let weight_v = wv * st * PI * dv * 2.0 * PI * du;
+                let heights: Vec<(f64, f64, f64)> = t
+                    .iter()
+                    .zip(w)
+                    .map(|(&tv, &wv)| {
+                        let (st, ct) = (PI * (j as f64 + tv) * dv).sin_cos();
+                        (st, ct, wv * st * PI * dv * 2.0 * PI * du)
+                    })
+                    .collect();
+                for cell_phis in phis.chunks_exact(t.len()) {
+                    for &(st, ct, weight_v) in &heights {
                         for (&(sp, cp), &wu) in cell_phis.iter().zip(w) {
                             let local = Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32);
                             p.push(world(local), weight_v * wu, st < POLE_BAND_SIN);

@@ -6,7 +6,7 @@ use crate::checks::chi_square::{chi_square, ChiSquare};
 use crate::checks::consistency::{consistency, Consistency};
 use crate::checks::normalisation::{normalisation, Normalisation};
 use crate::checks::support::{support, Support};
-use crate::checks::unbiasedness::{lobe_normals, unbiasedness, Unbiasedness};
+use crate::checks::unbiasedness::{lobe_normals, unbiasedness, Reference, Unbiasedness};
 use crate::integrand::Integrand;
 use crate::report::Row;
 use crate::sampler::SphereSampler;
@@ -52,6 +52,8 @@ pub struct Config {
     pub mc_samples: usize,
     /// The lobes the unbiasedness check adds to the integrand.
     pub lobes: Lobes,
+    /// How the unbiasedness check integrates its references.
+    pub reference: Reference,
     /// Whether to run the support check.
     pub support: bool,
     /// Whether to run the unbiasedness check.
@@ -72,6 +74,7 @@ impl Config {
         pdf_tolerance: PDF_CONSISTENCY_TOLERANCE,
         mc_samples: 1_000_000,
         lobes: Lobes::Standard,
+        reference: Reference::Checked,
         support: true,
         unbiasedness: true,
         efficiency: true,
@@ -152,7 +155,14 @@ pub fn run(
             Lobes::Standard => lobe_normals(s),
             Lobes::Zenith => vec![Vec3::new(0.0, 0.0, 1.0)],
         };
-        unbiasedness(s, integrand, &lobes, cfg.mc_samples, cfg.seed ^ 3)
+        unbiasedness(
+            s,
+            integrand,
+            &lobes,
+            cfg.mc_samples,
+            cfg.seed ^ 3,
+            cfg.reference,
+        )
     });
     done(&mut seconds);
     Report {

@@ -526,6 +526,7 @@ fn broken_scaled_pdf_is_rejected() {
         &verify::lobe_normals(&s),
         1_000_000,
         22,
+        verify::Reference::Checked,
     );
     println!("[{}]\n  {n}\n  {c}\n  {u}", s.name());
     assert!(
@@ -591,6 +592,7 @@ fn broken_unfiltered_importance_is_rejected() {
         &verify::lobe_normals(&s),
         1_000_000,
         25,
+        verify::Reference::Checked,
     );
     println!("[{}]\n  {sup}\n  {u}", s.name());
     assert!(sup.verdict().is_err() && sup.violations > 0, "{sup}");
@@ -718,6 +720,7 @@ fn broken_equal_area_samplers_are_rejected() {
         &verify::lobe_normals(&s),
         1_000_000,
         31,
+        verify::Reference::Checked,
     );
     println!("[{}]\n  {n}\n  {chi}\n  {u}", s.name());
     assert!(n.verdict(false).is_err(), "{n}");

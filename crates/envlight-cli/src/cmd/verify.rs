@@ -5,7 +5,7 @@
 use std::io::Write;
 
 use anyhow::Context;
-use envlight_verify::{format_table, Config, Integrand, Lobes, Row, Verdict};
+use envlight_verify::{format_table, Config, Integrand, Lobes, Reference, Row, Verdict};
 
 use super::Outcome;
 use crate::light_args::LightArgs;
@@ -29,7 +29,8 @@ direction decides (exempt, and allowed only as a tiny fraction).\n\
   chi-square       samples binned into about N/20 bins (groups of cells), expected counts \
 integrated from pdf(), bins expecting < 5 pooled: p-value ≥ 1e-3.\n\
   unbiased (Y)     the mean of Y/p is within 4 standard errors (plus 1e-4 relative for the \
-quadrature) of ∫Y dω by Gauss-Legendre quadrature.\n\
+quadrature) of ∫Y dω by the midpoint rule on every cell split in four (exact for bilinear \
+radiance).\n\
   unbiased (cos)   the same for Y·max(0, z)/p (a cosine lobe around +z).\n\
   support          p > 0 wherever L > 0, probed at every cell's centre and 2% in from its \
 corners.\n\
@@ -69,6 +70,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         let config = Config {
             pdf_tolerance: PDF_TOLERANCE,
             lobes: Lobes::Zenith,
+            reference: Reference::Midpoint,
             ..Config::with_samples(n, args.seed)
         };
         let progress = Progress::bar(5, "verifying");

@@ -5,6 +5,7 @@ use crate::param::Frame;
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;
 use rayon::prelude::*;
+use std::f64::consts::PI;
 use std::fmt;
 
 /// `p(ω) > 0` wherever the integrand `Y(L(ω))·f(ω) > 0`, probed at every cell's
@@ -83,6 +84,12 @@ pub fn support(s: &dyn SphereSampler, integrand: &Integrand) -> Support {
         [INSET, 1.0 - INSET],
         [1.0 - INSET, 1.0 - INSET],
     ];
+    // Probes share three u offsets and three v offsets per cell.
+    let offsets = [INSET, 0.5, 1.0 - INSET];
+    let us: Vec<f64> = (0..w)
+        .flat_map(|i| offsets.map(|o| (i as f64 + o) / w as f64))
+        .collect();
+    let u_trig: Vec<(f64, f64)> = us.iter().map(|u| (2.0 * PI * u).sin_cos()).collect();
     let rows: Vec<Support> = (0..h)
         .into_par_iter()
         .map(|j| {
@@ -90,16 +97,20 @@ pub fn support(s: &dyn SphereSampler, integrand: &Integrand) -> Support {
             // The row's probes off the poles, their radiance and pdf in batches.
             let mut at = Vec::with_capacity(w * probes.len());
             let mut directions = Vec::with_capacity(w * probes.len());
-            for i in 0..w {
-                for (k, p) in probes.iter().enumerate() {
-                    let (u, v) = ((i as f64 + p[0]) / w as f64, (j as f64 + p[1]) / h as f64);
-                    r.probes += 1;
-                    if frame.param.near_pole([u, v]) {
-                        r.near_pole += 1;
-                    } else {
-                        at.push((i, k));
-                        directions.push(frame.world_at(u, v));
-                    }
+            let mut line = Vec::with_capacity(us.len());
+            for (k, p) in probes.iter().enumerate() {
+                let v = (j as f64 + p[1]) / h as f64;
+                r.probes += w;
+                if frame.param.near_pole([0.0, v]) {
+                    r.near_pole += w;
+                    continue;
+                }
+                line.clear();
+                frame.world_row(&us, &u_trig, v, &mut line);
+                let column = offsets.iter().position(|&o| o == p[0]).unwrap_or(1);
+                for i in 0..w {
+                    at.push((i, k));
+                    directions.push(line[3 * i + column]);
                 }
             }
             let mut radiance = vec![[0.0f32; 3]; directions.len()];
