@@ -42,6 +42,7 @@ pub mod light;
 pub mod load;
 pub mod mapping;
 pub mod math;
+pub mod product;
 pub mod rng;
 
 pub use distribution::{Distribution1D, Distribution2D};
@@ -49,6 +50,7 @@ pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
+pub use product::{Factor, ProductOptions, ProductSampler, ShadingPoint};
 
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
 #[doc = include_str!("../../../README.md")]

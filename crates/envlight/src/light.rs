@@ -1517,6 +1517,62 @@ pub(crate) fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
     }
 }
 
+// ---------------------------------------------------------------------------
+// Crate-internal hooks for `crate::product`, kept together here on purpose: the
+// product sampler builds its own fine level from this light's importance and maps
+// image points to directions exactly as the light does.
+// ---------------------------------------------------------------------------
+
+impl EnvironmentLight {
+    /// Rows `first_row..first_row + out.len() / w` of the texel-grid importance of
+    /// DESIGN.md §4 step 1 (`Y(filtered) · J_j`, never MIS-compensated), `w` values
+    /// per row, whatever the light's sampler and density.
+    pub(crate) fn importance_rows(&self, first_row: usize, out: &mut [f32]) {
+        let w = self.image.width();
+        let mut cache = LuminanceRows::new(w);
+        for (k, row) in out.chunks_exact_mut(w).enumerate() {
+            let (lookup, mapping) = (self.options.lookup, self.options.mapping);
+            importance_row(&self.image, lookup, mapping, &mut cache, first_row + k, row);
+        }
+    }
+
+    /// The light-frame unit direction at image point `uv` and `dω / du dv` there.
+    #[inline(always)]
+    pub(crate) fn uv_to_local(&self, uv: [f32; 2]) -> (Vec3, f32) {
+        self.options.mapping.to_direction(uv)
+    }
+
+    /// The image point of a light-frame direction and `du dv / dω` there.
+    #[inline(always)]
+    pub(crate) fn local_to_uv(&self, d: Vec3) -> ([f32; 2], f32) {
+        self.options.mapping.to_uv(d)
+    }
+
+    /// A light-frame direction in the world frame.
+    #[inline(always)]
+    pub(crate) fn local_to_world(&self, d: Vec3) -> Vec3 {
+        self.to_world(d)
+    }
+
+    /// A world direction in the light frame.
+    #[inline(always)]
+    pub(crate) fn world_to_local(&self, d: Vec3) -> Vec3 {
+        self.to_light(d)
+    }
+
+    /// The radiance lookup at image point `uv` (scale applied).
+    #[inline(always)]
+    pub(crate) fn radiance_at_uv(&self, uv: [f32; 2]) -> [f32; 3] {
+        self.lookup(uv)
+    }
+}
+
+/// [`solid_angle`] for `crate::product`.
+#[inline(always)]
+pub(crate) fn solid_angle_density(planar_pdf: f32, inv_jacobian: f32) -> f32 {
+    solid_angle(planar_pdf, inv_jacobian)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
