@@ -35,6 +35,7 @@
 mod checks;
 mod integrand;
 mod param;
+mod product;
 mod quadrature;
 mod report;
 mod sampler;
@@ -54,6 +55,7 @@ pub use checks::unbiasedness::{
 };
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};
+pub use product::AtShadingPoint;
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
@@ -115,6 +117,7 @@ pub const Z_TOLERANCE: f64 = 4.0;
 /// cosine lobe (for real maps: order 2 against order 1, see [`unbiasedness`]). The
 /// harness measures that error as `|Q3 - Q2|` (orders 3 and 2 on the same cells; an
 /// overestimate of Q3's error; measured ≤ 1.5e-5 relative on every case, the
-/// largest for a lobe on a real map) and fails when it exceeds this slack, so the
-/// slack is checked, not assumed.
+/// largest for a lobe on a real map) and fails when it exceeds this slack (or one
+/// standard error, see [`Estimate::quadrature_allowance`]), so the slack is
+/// checked, not assumed.
 pub const QUADRATURE_SLACK: f64 = 1e-4;

@@ -50,7 +50,7 @@ pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
-pub use product::{Factor, ProductOptions, ProductSampler, ShadingPoint};
+pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
 
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
 #[doc = include_str!("../../../README.md")]

@@ -73,6 +73,23 @@ pub struct ProductOptions {
     /// More patches bound the factor more tightly (fewer samples where `f` is small)
     /// and cost more per shading point ([`ProductSampler::at`] is `O(Pw Ph)`).
     pub patches: Option<[usize; 2]>,
+    /// How a patch's weight bounds the factor: always [`PatchBound::Cone`] except
+    /// in tests that prove the verification harness rejects the alternative.
+    #[doc(hidden)]
+    pub bound: PatchBound,
+}
+
+/// How [`ProductSampler`] weights a patch.
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PatchBound {
+    /// `B_k`, the upper bound of the factor over the patch's cone: unbiased.
+    #[default]
+    Cone,
+    /// The factor at the cone's axis only: **biased** (a patch straddling the
+    /// horizon whose axis is below it gets weight 0 while part of it is lit).
+    /// It exists so that tests can show that the invariant checks catch it.
+    AxisOnly,
 }
 
 impl ProductOptions {
@@ -341,6 +358,8 @@ pub struct ProductSampler {
     /// `w h / CDF_ONE²`: a texel's density in `(u, v)` given its patch is its two
     /// CDF widths times this.
     planar_scale: f64,
+    /// How patches are weighted.
+    bound: PatchBound,
 }
 
 impl ProductSampler {
@@ -421,6 +440,7 @@ impl ProductSampler {
             .collect();
         Self {
             planar_scale: (w as f64 / CDF_ONE as f64) * (h as f64 / CDF_ONE as f64),
+            bound: options.bound,
             light,
             size: [w, h],
             patches: [pw, ph],
@@ -635,10 +655,20 @@ impl ShadingPoint<'_> {
             return;
         };
         let target = sampler.target(&factor);
+        let axis_only = sampler.bound == PatchBound::AxisOnly;
         let mut sum = 0.0f64;
         for (patch, running) in sampler.patch.iter().zip(&mut self.running[1..]) {
             let weight = if patch.power > 0.0 {
-                patch.power * target.bound(&patch.cone)
+                let cone = if axis_only {
+                    Cone {
+                        cos_half: 1.0,
+                        sin_half: 0.0,
+                        ..patch.cone
+                    }
+                } else {
+                    patch.cone
+                };
+                patch.power * target.bound(&cone)
             } else {
                 0.0
             };
@@ -983,7 +1013,13 @@ mod tests {
         let light = EnvironmentLight::new(image, options).unwrap();
         Case {
             name,
-            sampler: ProductSampler::new(Arc::new(light), ProductOptions { patches }),
+            sampler: ProductSampler::new(
+                Arc::new(light),
+                ProductOptions {
+                    patches,
+                    ..Default::default()
+                },
+            ),
         }
     }
 

@@ -1,0 +1,91 @@
+//! A product sampler at one shading point, as a [`SphereSampler`] (DESIGN.md §6a).
+
+use crate::integrand::Integrand;
+use crate::sampler::{Grid, SphereSample, SphereSampler};
+use envlight::{EnvironmentLight, Factor, ProductSampler, ShadingPoint, Vec3};
+
+/// [`ProductSampler`] conditioned on one [`Factor`]: what the checks see of a
+/// renderer's shading point. Its density follows [`Self::integrand`],
+/// `Y(L(ω)) · f(ω)`; it is piecewise constant on the light's own cell grid, which
+/// it reports as its [`Grid`].
+pub struct AtShadingPoint<'a> {
+    point: ShadingPoint<'a>,
+    sampler: &'a ProductSampler,
+    factor: Factor,
+}
+
+impl<'a> AtShadingPoint<'a> {
+    /// `sampler` at the shading point of `factor`.
+    pub fn new(sampler: &'a ProductSampler, factor: Factor) -> Self {
+        Self {
+            point: sampler.at(&factor),
+            sampler,
+            factor,
+        }
+    }
+
+    /// `Σw`, the sum of the patch weights: 0 when nothing the surface sees is lit
+    /// (then nothing is sampled and the pdf is 0 everywhere).
+    pub fn weight_sum(&self) -> f64 {
+        self.point.weight_sum()
+    }
+
+    /// The light behind the sampler.
+    pub fn light(&self) -> &EnvironmentLight {
+        self.sampler.light()
+    }
+
+    /// `Y(L(ω)) · f(ω)`, the integrand this sampler's pdf is meant to follow.
+    pub fn integrand(&self) -> Integrand<'_> {
+        let f = self.factor;
+        let label = match f {
+            Factor::Cosine { normal: n } => format!("Y·cos⁺ n=({:.2},{:.2},{:.2})", n.x, n.y, n.z),
+            Factor::Glossy {
+                normal: n,
+                roughness,
+                ..
+            } => format!(
+                "Y·cos⁺·GGX(α={roughness}) n=({:.2},{:.2},{:.2})",
+                n.x, n.y, n.z
+            ),
+        };
+        Integrand::luminance_times(label, move |d| f.value(d) as f64)
+    }
+}
+
+impl SphereSampler for AtShadingPoint<'_> {
+    fn name(&self) -> String {
+        format!(
+            "product {:?} with {}x{} patches over {}",
+            self.factor,
+            self.sampler.patches()[0],
+            self.sampler.patches()[1],
+            SphereSampler::name(self.light())
+        )
+    }
+    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
+        self.point.sample(xi).map(|s| SphereSample {
+            direction: s.direction,
+            pdf: s.pdf,
+            radiance: s.radiance,
+        })
+    }
+    fn pdf(&self, direction: Vec3) -> f32 {
+        self.point.pdf(direction)
+    }
+    fn invert(&self, _: Vec3) -> Option<[f32; 2]> {
+        None
+    }
+    fn radiance(&self, direction: Vec3) -> [f32; 3] {
+        self.light().radiance(direction)
+    }
+    fn integral_luminance(&self) -> f64 {
+        self.light().integral_luminance()
+    }
+    fn grid(&self) -> Option<Grid> {
+        SphereSampler::grid(self.light())
+    }
+    fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
+        self.light().radiance_batch(directions, out)
+    }
+}

@@ -1,0 +1,528 @@
+//! Building an [`EnvironmentLight`]: the option checks and the resampling of a
+//! lat-long input to the light's mapping, the texel-grid importance of
+//! DESIGN.md §4 step 1 and its MIS compensation, the node values of the bilinear
+//! density, the 2D sampler over them, and `∫ L dω`.
+
+use super::{Density, EnvironmentLight, LightOptions, Mapping, Planar, Sampler};
+use crate::alias::AliasTable2D;
+use crate::bilinear::BilinearDistribution2D;
+use crate::color::luminance;
+use crate::distribution::{for_each_row, Distribution2D};
+use crate::equal_area;
+use crate::error::{Error, Result};
+use crate::hierarchical::Hierarchical2D;
+use crate::image::{EnvImage, Lookup, WrapU};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+impl EnvironmentLight {
+    /// Builds the light and its sampling distribution (rows in parallel).
+    ///
+    /// Time `O(w h)` (plus the resampling for an equal-area light from a lat-long
+    /// map); memory: the image plus the sampler's data, 5 to 6 bytes per texel for
+    /// the default inversion sampler.
+    ///
+    /// # Errors
+    /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
+    /// bilinear density is asked of a sampler other than inversion, an equal-area
+    /// input is not square, or an equal-area input is asked for a lat-long light.
+    pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
+        Self::with_progress(image, options, &|_| {})
+    }
+
+    /// [`Self::new`], reporting progress for a front end's progress bar: the build
+    /// calls `rows_done(k)` each time it has finished `k` more rows of the light's
+    /// image ([`Self::image`], so for an equal-area light from a lat-long map, rows
+    /// of the resampled square). Calls come from the worker threads, in no
+    /// particular order; their counts add up to the image's height.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn with_progress(
+        image: EnvImage,
+        options: LightOptions,
+        rows_done: &(dyn Fn(usize) + Sync),
+    ) -> Result<Self> {
+        if !(options.scale >= 0.0 && options.scale.is_finite()) {
+            return Err(Error::InvalidOption(format!(
+                "radiance scale must be finite and >= 0, got {}",
+                options.scale
+            )));
+        }
+        if options.density == Density::PiecewiseBilinear && options.sampler != Sampler::Inversion {
+            return Err(Error::InvalidOption(format!(
+                "the piecewise-bilinear density is sampled by inversion only, not by the {} sampler",
+                options.sampler.name()
+            )));
+        }
+        let image = match (options.input_mapping, options.mapping) {
+            (Mapping::Equirectangular, Mapping::Equirectangular) => image,
+            (Mapping::Equirectangular, Mapping::EqualArea) => {
+                let size = options
+                    .equal_area_size
+                    .unwrap_or_else(|| equal_area::default_size(image.width(), image.height()));
+                if size == 0 {
+                    return Err(Error::InvalidOption(
+                        "the equal-area size must be at least 1".into(),
+                    ));
+                }
+                equal_area::resample_equirect(&image, size, options.lookup)
+            }
+            (Mapping::EqualArea, Mapping::EqualArea) => {
+                if image.width() != image.height() {
+                    return Err(Error::InvalidOption(format!(
+                        "an equal-area map must be square, this one is {}x{}",
+                        image.width(),
+                        image.height()
+                    )));
+                }
+                image
+            }
+            (Mapping::EqualArea, Mapping::Equirectangular) => {
+                return Err(Error::InvalidOption(
+                    "an equal-area input can only be lit with the equal-area mapping".into(),
+                ))
+            }
+        };
+        let (planar, integral_rgb, compensated) = build_sampler(&image, &options, rows_done);
+        Ok(Self {
+            world_to_light: options.rotation.inverse(),
+            rotated: !options.rotation.is_identity(),
+            image,
+            options,
+            planar,
+            integral_rgb,
+            compensated,
+        })
+    }
+}
+
+/// The sampler for `options` over `image` (already in the light's mapping),
+/// `∫ L dω` of the unscaled image, and whether MIS compensation took effect.
+/// `rows_done` hears of every image row once its importance (or, for the bilinear
+/// density, its sums) is done: the one pass over the texels.
+fn build_sampler(
+    image: &EnvImage,
+    options: &LightOptions,
+    rows_done: &(dyn Fn(usize) + Sync),
+) -> (Planar, [f64; 3], bool) {
+    let (w, h) = (image.width(), image.height());
+    let mapping = options.mapping;
+    let init = || LuminanceRows::new(w);
+    let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
+        let sums = importance_row(image, options.lookup, mapping, cache, j, out);
+        rows_done(1);
+        sums
+    };
+    let integral = |row_sums: &[[f64; 3]]| integral_rgb(row_sums, w, options.lookup, mapping);
+    match options.density {
+        Density::PiecewiseConstant
+            if options.sampler == Sampler::Inversion && !options.mis_compensation =>
+        {
+            // The default path: importance rows go straight into CDFs, never stored.
+            let (distribution, row_sums) = Distribution2D::from_rows_with(w, h, init, fill);
+            (Planar::Inversion(distribution), integral(&row_sums), false)
+        }
+        Density::PiecewiseConstant => {
+            let mut values = vec![0.0f32; w * h];
+            let mut rows: Vec<&mut [f32]> = values.chunks_mut(w).collect();
+            let (_, row_sums) = for_each_row(w, init, fill, &mut rows, |row, out| {
+                out.copy_from_slice(row);
+                0.0
+            });
+            let subtracted = options
+                .mis_compensation
+                .then(|| compensate(&values, w, h, mapping))
+                .flatten();
+            let compensated = subtracted.is_some();
+            let f = subtracted.as_deref().unwrap_or(&values);
+            let planar = match options.sampler {
+                Sampler::Inversion => Planar::Inversion(Distribution2D::new(f, w)),
+                Sampler::Alias => Planar::Alias(AliasTable2D::new(f, w)),
+                Sampler::Hierarchical => Planar::Hierarchical(Hierarchical2D::new(f, w)),
+            };
+            (planar, integral(&row_sums), compensated)
+        }
+        Density::PiecewiseBilinear => {
+            let row_sums: Vec<[f64; 3]> = (0..h)
+                .into_par_iter()
+                .map(|j| rgb_sum(image.row(j)))
+                .collect();
+            let (mut values, u_nodes, v_nodes) = bilinear_nodes(image, mapping);
+            let (mu, mv) = (u_nodes.len(), v_nodes.len());
+            let mut compensated = false;
+            if options.mis_compensation {
+                // Nodes carry Y·J at their own v; subtract Ȳ·J node by node.
+                let factors: Vec<f64> = v_nodes.iter().map(|&v| mapping.area_factor(v)).collect();
+                if let Some(c) = compensate_rows(&values, mu, mv, &factors) {
+                    values = c;
+                    compensated = true;
+                }
+            }
+            (
+                Planar::Bilinear(BilinearDistribution2D::new(&values, &u_nodes, &v_nodes)),
+                integral(&row_sums),
+                compensated,
+            )
+        }
+    }
+}
+
+/// MIS compensation of a texel-grid importance `f = Y · J_j`: `max(0, f − Ȳ J_j)`
+/// with `Ȳ = Σ f / Σ J` (the solid-angle mean of the filtered luminance), or `None`
+/// when nothing is above the mean (keep `f`).
+fn compensate(f: &[f32], w: usize, h: usize, mapping: Mapping) -> Option<Vec<f32>> {
+    let factors: Vec<f64> = (0..h)
+        .map(|j| mapping.area_factor((j as f64 + 0.5) / h as f64))
+        .collect();
+    compensate_rows(f, w, h, &factors)
+}
+
+/// [`compensate`] for any grid of `rows` rows of `cols` values whose row `k` was
+/// multiplied by `factors[k]`.
+fn compensate_rows(f: &[f32], cols: usize, rows: usize, factors: &[f64]) -> Option<Vec<f32>> {
+    let total_f: f64 = f.iter().map(|&x| x as f64).sum();
+    let total_j: f64 = factors.iter().sum::<f64>() * cols as f64;
+    if !(total_f > 0.0 && total_j > 0.0) {
+        return None;
+    }
+    let mean = total_f / total_j;
+    let mut out = vec![0.0f32; f.len()];
+    let mut any = false;
+    for k in 0..rows {
+        let threshold = mean * factors[k];
+        for (o, &x) in out[k * cols..(k + 1) * cols]
+            .iter_mut()
+            .zip(&f[k * cols..(k + 1) * cols])
+        {
+            // Within rounding of the threshold counts as not above it, so a constant
+            // map (f = Ȳ J up to f32 rounding) keeps its ordinary density.
+            if x as f64 > threshold * (1.0 + 1e-5) {
+                *o = (x as f64 - threshold) as f32;
+                any = true;
+            }
+        }
+    }
+    any.then_some(out)
+}
+
+/// Node values and positions of the piecewise-bilinear density: `Y · J` at every
+/// texel centre, plus edge nodes at u = 0, 1 and v = 0, 1 that reproduce the
+/// lookup's edge behaviour (the seam average for periodic u; a copy of the edge
+/// texels for clamped u and for v). Returns `(values, u_nodes, v_nodes)`, values
+/// row-major over `(h + 2) × (w + 2)` nodes.
+fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
+    let (w, h) = (image.width(), image.height());
+    let centres = |n: usize| -> Vec<f64> {
+        let mut nodes = Vec::with_capacity(n + 2);
+        nodes.push(0.0);
+        nodes.extend((0..n).map(|i| (i as f64 + 0.5) / n as f64));
+        nodes.push(1.0);
+        nodes
+    };
+    let (u_nodes, v_nodes) = (centres(w), centres(h));
+    let mu = w + 2;
+    let mut values = vec![0.0f32; mu * (h + 2)];
+    values.par_chunks_mut(mu).enumerate().for_each(|(k, out)| {
+        // Node row k sits at v_nodes[k]; its radiance is texel row k-1, clamped.
+        let j = k.saturating_sub(1).min(h - 1);
+        let factor = mapping.area_factor(v_nodes[k]) as f32;
+        let row = image.row(j);
+        for (o, t) in out[1..=w].iter_mut().zip(row) {
+            *o = luminance(*t) * factor;
+        }
+        let (first, last) = (out[1], out[w]);
+        let (left, right) = match mapping.wrap() {
+            WrapU::Periodic => {
+                let seam = 0.5 * (first + last);
+                (seam, seam)
+            }
+            WrapU::Clamp => (first, last),
+        };
+        out[0] = left;
+        out[w + 1] = right;
+    });
+    (values, u_nodes, v_nodes)
+}
+
+/// Row `j` of the texel-grid importance of DESIGN.md §4 step 1, written to `out`;
+/// returns the row's RGB sums (for `∫ L dω`).
+///
+/// Importance: `f[j][i] = Y(filtered) · J_j`; for bilinear lookups the filter is
+/// the `[1 6 1]/8` blur in v (clamped) then u (wrapped or clamped with the
+/// mapping), whose three input rows come from a rolling cache so each row's
+/// luminance is computed once per block of rows.
+pub(super) fn importance_row(
+    image: &EnvImage,
+    lookup: Lookup,
+    mapping: Mapping,
+    cache: &mut LuminanceRows,
+    j: usize,
+    out: &mut [f32],
+) -> [f64; 3] {
+    let (w, h) = (image.width(), image.height());
+    let factor = mapping.area_factor((j as f64 + 0.5) / h as f64) as f32;
+    match lookup {
+        Lookup::Nearest => {
+            let (luma, _) = cache.row(image, j);
+            for (o, &y) in out.iter_mut().zip(luma) {
+                *o = y * factor;
+            }
+        }
+        Lookup::Bilinear => {
+            // Vertical [1 6 1]/8 (clamped) into the cache's scratch row, then
+            // horizontal into `out`: two passes without branches, which vectorize.
+            cache.vertical_blur(image, j);
+            let vertical = &cache.blurred;
+            let (first, last) = (vertical[0], vertical[w - 1]);
+            let (before_first, beyond_last) = match mapping.wrap() {
+                WrapU::Periodic => (last, first),
+                WrapU::Clamp => (first, last),
+            };
+            let blur =
+                |prev: f32, centre: f32, next: f32| (prev + 6.0 * centre + next) * 0.125 * factor;
+            if w == 1 {
+                out[0] = blur(before_first, first, beyond_last);
+            } else {
+                for ((o, &centre), (&prev, &next)) in out[1..w - 1]
+                    .iter_mut()
+                    .zip(&vertical[1..w - 1])
+                    .zip(vertical.iter().zip(&vertical[2..]))
+                {
+                    *o = blur(prev, centre, next);
+                }
+                out[0] = blur(before_first, first, vertical[1]);
+                out[w - 1] = blur(vertical[w - 2], last, beyond_last);
+            }
+        }
+    }
+    cache.row(image, j).1
+}
+
+/// `∫ L dω` from each row's RGB sums.
+///
+/// Along u, linear interpolation between texel centres (wrapped, or clamped with
+/// constant half-texels at the ends) integrates to the row mean, so
+/// `∫ L dω = Σ_j W_j · mean_i L[j][i]` with `W_j` the solid angle of row j's
+/// reconstruction weight ([`row_solid_angles`]); exact for either lookup.
+fn integral_rgb(row_sums: &[[f64; 3]], w: usize, lookup: Lookup, mapping: Mapping) -> [f64; 3] {
+    let h = row_sums.len();
+    let weights = match mapping {
+        Mapping::Equirectangular => row_solid_angles(h, lookup),
+        // Constant Jacobian: every row covers the same solid angle, 4π/h, and the
+        // clamped interpolation in v integrates to the mean like the one in u.
+        Mapping::EqualArea => vec![4.0 * PI / h as f64; h],
+    };
+    let mut integral = [0.0f64; 3];
+    for (sums, weight) in row_sums.iter().zip(&weights) {
+        for k in 0..3 {
+            integral[k] += sums[k] / w as f64 * weight;
+        }
+    }
+    integral
+}
+
+/// Per-channel sums of a row of texels, in f64. The row is read as a flat run of
+/// floats with twelve partial sums (four texels' worth, so that partial `k` holds
+/// channel `k mod 3`): the adds are independent, and the loop vectorizes.
+fn rgb_sum(row: &[[f32; 3]]) -> [f64; 3] {
+    let flat = row.as_flattened();
+    let mut partial = [0.0f64; 12];
+    let chunks = flat.chunks_exact(12);
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        for (p, &x) in partial.iter_mut().zip(chunk) {
+            *p += x as f64;
+        }
+    }
+    for (p, &x) in partial.iter_mut().zip(rest) {
+        *p += x as f64;
+    }
+    std::array::from_fn(|c| (partial[c] + partial[c + 3]) + (partial[c + 6] + partial[c + 9]))
+}
+
+/// The luminance of the last three image rows a build task asked for, with each
+/// row's RGB sums (f64), so the `[1 6 1]` filter computes every row's luminance once
+/// per block of rows instead of three times.
+pub(super) struct LuminanceRows {
+    slots: [(usize, Vec<f32>, [f64; 3]); 3],
+    /// The vertically filtered luminance of the row being built.
+    blurred: Vec<f32>,
+}
+
+impl LuminanceRows {
+    pub(super) fn new(w: usize) -> Self {
+        Self {
+            slots: std::array::from_fn(|_| (usize::MAX, vec![0.0; w], [0.0; 3])),
+            blurred: vec![0.0; w],
+        }
+    }
+
+    /// Fills `blurred` with the `[1 6 1]/8` filter in v of row `j`'s luminance (the
+    /// rows above and below clamped to the image).
+    fn vertical_blur(&mut self, image: &EnvImage, j: usize) {
+        let h = image.height();
+        // Each distinct row into the cache first; then all three are borrowed.
+        for row in [j.saturating_sub(1), j, (j + 1).min(h - 1)] {
+            self.row(image, row);
+        }
+        let slot = |j: usize| &self.slots.iter().find(|s| s.0 == j).expect("cached").1;
+        let (above, centre, below) = (slot(j.saturating_sub(1)), slot(j), slot((j + 1).min(h - 1)));
+        for (((b, &a), &c), &d) in self.blurred.iter_mut().zip(above).zip(centre).zip(below) {
+            *b = (a + d + 6.0 * c) * 0.125;
+        }
+    }
+
+    /// Luminance and RGB sums of row `j`, computed unless cached.
+    pub(super) fn row(&mut self, image: &EnvImage, j: usize) -> (&[f32], [f64; 3]) {
+        let slot = match self.slots.iter().position(|s| s.0 == j) {
+            Some(slot) => slot,
+            None => {
+                // Rows are requested in increasing order: the lowest row is stale.
+                let slot = (0..3)
+                    .min_by_key(|&k| self.slots[k].0.wrapping_add(1))
+                    .unwrap_or(0);
+                let (id, luma, sums) = &mut self.slots[slot];
+                *id = j;
+                let row = image.row(j);
+                for (y, rgb) in luma.iter_mut().zip(row) {
+                    *y = luminance(*rgb);
+                }
+                *sums = rgb_sum(row);
+                slot
+            }
+        };
+        let (_, luma, sums) = &self.slots[slot];
+        (luma, *sums)
+    }
+}
+
+/// Solid angle `W_j` attributed to each row by `lookup` (they sum to 4π).
+fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
+    let hf = h as f64;
+    match lookup {
+        Lookup::Nearest => (0..h)
+            .map(|j| 2.0 * PI * ((PI * j as f64 / hf).cos() - (PI * (j + 1) as f64 / hf).cos()))
+            .collect(),
+        Lookup::Bilinear => {
+            const GL_T: [f64; 4] = [
+                0.069_431_844_202_973_71,
+                0.330_009_478_207_571_9,
+                0.669_990_521_792_428_1,
+                0.930_568_155_797_026_3,
+            ];
+            const GL_W: [f64; 4] = [
+                0.173_927_422_568_726_9,
+                0.326_072_577_431_273_1,
+                0.326_072_577_431_273_1,
+                0.173_927_422_568_726_9,
+            ];
+            let mut weights = vec![0.0f64; h];
+            for j in 0..h {
+                let centre = (j as f64 + 0.5) / hf;
+                // Upper half: between the top edge of texel j and its centre, the
+                // neighbour is row j-1; lower half: row j+1 (clamped at the ends).
+                for (lo, neighbour) in [
+                    (j as f64 / hf, j.saturating_sub(1)),
+                    (centre, (j + 1).min(h - 1)),
+                ] {
+                    let len = 0.5 / hf;
+                    for (t, gw) in GL_T.iter().zip(GL_W) {
+                        let v = lo + t * len;
+                        let dw = 2.0 * PI * PI * (PI * v).sin() * gw * len;
+                        let far = ((v - centre).abs() * hf).min(1.0);
+                        weights[j] += (1.0 - far) * dw;
+                        weights[neighbour] += far * dw;
+                    }
+                }
+            }
+            weights
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The importance rows, filter and RGB sums against a texel-by-texel reading of
+    /// DESIGN.md §4 step 1, on small maps where every texel is next to an edge.
+    #[test]
+    fn importance_rows_match_their_definition() {
+        let mut rng = crate::rng::SplitMix64::new(5);
+        for (w, h) in [(1, 1), (1, 3), (2, 1), (2, 2), (3, 5), (7, 4), (13, 6)] {
+            let texels: Vec<[f32; 3]> = (0..w * h)
+                .map(|_| [rng.next_f32() * 4.0, rng.next_f32(), rng.next_f32() * 0.5])
+                .collect();
+            let image = EnvImage::new(w, h, texels).expect("a valid image");
+            for mapping in Mapping::ALL {
+                for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+                    let mut cache = LuminanceRows::new(w);
+                    let mut out = vec![0.0f32; w];
+                    for j in 0..h {
+                        let sums = importance_row(&image, lookup, mapping, &mut cache, j, &mut out);
+                        let factor = mapping.area_factor((j as f64 + 0.5) / h as f64);
+                        let y = |i: isize, j: isize| {
+                            let j = j.clamp(0, h as isize - 1) as usize;
+                            let i = match mapping.wrap() {
+                                WrapU::Periodic => i.rem_euclid(w as isize),
+                                WrapU::Clamp => i.clamp(0, w as isize - 1),
+                            } as usize;
+                            luminance(image.texel(i, j)) as f64
+                        };
+                        for (i, &got) in out.iter().enumerate() {
+                            let (i, jj) = (i as isize, j as isize);
+                            let want = match lookup {
+                                Lookup::Nearest => y(i, jj),
+                                Lookup::Bilinear => {
+                                    let weights = [1.0, 6.0, 1.0];
+                                    let mut sum = 0.0;
+                                    for (a, wa) in (-1..=1).zip(weights) {
+                                        for (b, wb) in (-1..=1).zip(weights) {
+                                            sum += wa * wb * y(i + a, jj + b);
+                                        }
+                                    }
+                                    sum / 64.0
+                                }
+                            } * factor;
+                            let err = (got as f64 - want).abs();
+                            assert!(
+                                err <= 1e-6 * want.abs().max(1e-30),
+                                "{w}x{h} {mapping:?} {lookup:?} ({i}, {j}): {got} vs {want}"
+                            );
+                        }
+                        for (c, &sum) in sums.iter().enumerate() {
+                            let want: f64 = image.row(j).iter().map(|t| t[c] as f64).sum();
+                            assert!((sum - want).abs() <= 1e-12 * want.abs(), "{sum} vs {want}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn row_solid_angles_sum_to_the_sphere() {
+        for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+            for h in [1, 2, 3, 17, 512] {
+                let total: f64 = row_solid_angles(h, lookup).iter().sum();
+                assert!(
+                    (total / (4.0 * PI) - 1.0).abs() < 1e-7,
+                    "{lookup:?} h={h}: {total}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_scale_is_rejected() {
+        let image = EnvImage::from_fn(1, 1, |_, _| [1.0; 3]).unwrap();
+        for scale in [f32::NAN, -1.0, f32::INFINITY] {
+            let options = LightOptions {
+                scale,
+                ..Default::default()
+            };
+            assert!(EnvironmentLight::new(image.clone(), options).is_err());
+        }
+    }
+}

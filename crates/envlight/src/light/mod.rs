@@ -1,0 +1,624 @@
+//! The environment light: an HDR image at infinity, importance sampled in
+//! proportion to its luminance.
+//!
+//! Construction (DESIGN.md §4), for the default piecewise-constant density:
+//! 1. importance `f[j][i] = Y(filtered radiance of texel (i, j)) · J_j`, where `J_j`
+//!    is the mapping's area factor at the row centre (`sin θ_j` for the
+//!    equirectangular map, 1 for the equal-area square). For bilinear lookups the
+//!    filter is the exact texel-area average of the bilinear reconstruction, the
+//!    separable `[1 6 1]/8` blur (u wraps or clamps with the mapping, v clamps), so
+//!    every direction where `radiance()` can be non-zero has `pdf() > 0`. Nearest
+//!    lookups need no filter.
+//! 2. a 2D sampler over `f` ([`Sampler`]).
+//!
+//! The piecewise-bilinear density instead puts `Y · J` at the texel centres (the
+//! nodes of the bilinear reconstruction) and samples the bilinear interpolation of
+//! those values, so `L / p` is nearly constant.
+//!
+//! Sampling maps the image point `(u, v)` to a direction and converts the density to
+//! solid angle: `p(ω) = p(u, v) / (dω / du dv)`, with `dω / du dv = 2π² sin θ`
+//! (equirectangular) or `4π` (equal-area).
+//!
+//! The light itself, its options and its single queries live here; the
+//! submodules hold its construction (`build`), its batch queries (`batch`) and
+//! the efficiency quadrature (`efficiency`).
+
+mod batch;
+mod build;
+mod efficiency;
+
+use crate::alias::AliasTable2D;
+use crate::bilinear::BilinearDistribution2D;
+use crate::distribution::{Distribution2D, Sample2D};
+use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
+use crate::hierarchical::Hierarchical2D;
+use crate::image::{EnvImage, Lookup, WrapU};
+use crate::mapping::{direction_to_equirect_and_csc, equirect_to_direction, EQUIRECT_JACOBIAN};
+use crate::math::{is_positive_finite, Rotation, Vec3};
+use build::{importance_row, LuminanceRows};
+use std::f64::consts::PI;
+
+/// How directions are drawn from the density. All give the same density; they
+/// differ in speed, memory and whether nearby `ξ` give nearby directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Sampler {
+    /// CDF inversion (the seed's method): a row from the marginal, then a column
+    /// from the row, each found with a guide table and a short scan of a fixed-point
+    /// CDF. Keeps stratification; invertible; 5 to 6 bytes per texel.
+    #[default]
+    Inversion,
+    /// Vose's alias table over all cells: O(1) per sample, but it breaks
+    /// stratification (nearby `ξ` land anywhere), and it has no inverse.
+    Alias,
+    /// Hierarchical warping down a pyramid of sums: keeps stratification and is
+    /// invertible; one step per pyramid level.
+    Hierarchical,
+}
+
+/// The shape of the sampling density over the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Density {
+    /// Constant over each texel (the seed's): `f[j][i]` as in the module docs.
+    #[default]
+    PiecewiseConstant,
+    /// Bilinear between texel centres, proportional to the bilinear radiance
+    /// reconstruction times the mapping's area factor at the nodes. Sampled by
+    /// inversion only.
+    PiecewiseBilinear,
+}
+
+/// How image points map to directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mapping {
+    /// Latitude-longitude: `θ = π v`, `φ = 2π u` ([`crate::mapping`]).
+    #[default]
+    Equirectangular,
+    /// The equal-area octahedral square ([`crate::equal_area`]): constant Jacobian
+    /// `4π`, no pole singularity.
+    EqualArea,
+}
+
+impl Sampler {
+    /// Every sampler, for option parsers and tests.
+    pub const ALL: [Sampler; 3] = [Sampler::Inversion, Sampler::Alias, Sampler::Hierarchical];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampler::Inversion => "inversion",
+            Sampler::Alias => "alias",
+            Sampler::Hierarchical => "hierarchical",
+        }
+    }
+}
+
+impl Density {
+    /// Every density, for option parsers and tests.
+    pub const ALL: [Density; 2] = [Density::PiecewiseConstant, Density::PiecewiseBilinear];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Density::PiecewiseConstant => "piecewise-constant",
+            Density::PiecewiseBilinear => "piecewise-bilinear",
+        }
+    }
+}
+
+impl Mapping {
+    /// Every mapping, for option parsers and tests.
+    pub const ALL: [Mapping; 2] = [Mapping::Equirectangular, Mapping::EqualArea];
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mapping::Equirectangular => "equirectangular",
+            Mapping::EqualArea => "equal-area",
+        }
+    }
+
+    /// How u behaves at the image's left and right edges.
+    fn wrap(self) -> WrapU {
+        match self {
+            Mapping::Equirectangular => WrapU::Periodic,
+            Mapping::EqualArea => WrapU::Clamp,
+        }
+    }
+
+    /// The unit direction at `uv` and `dω / du dv` there.
+    #[inline(always)]
+    fn to_direction(self, uv: [f32; 2]) -> (Vec3, f32) {
+        match self {
+            Mapping::Equirectangular => {
+                let (d, sin_theta) = equirect_to_direction(uv[0], uv[1]);
+                (d, EQUIRECT_JACOBIAN * sin_theta)
+            }
+            Mapping::EqualArea => (
+                equal_area::square_to_sphere(uv[0], uv[1]),
+                EQUAL_AREA_JACOBIAN,
+            ),
+        }
+    }
+
+    /// The image point looking along `d`, and `du dv / dω` there (the reciprocal
+    /// of the Jacobian; +∞ at the poles of the lat-long map).
+    #[inline(always)]
+    fn to_uv(self, d: Vec3) -> ([f32; 2], f32) {
+        match self {
+            Mapping::Equirectangular => {
+                let (uv, csc_theta) = direction_to_equirect_and_csc(d);
+                (uv, csc_theta * (1.0 / EQUIRECT_JACOBIAN))
+            }
+            Mapping::EqualArea => (equal_area::sphere_to_square(d), 1.0 / EQUAL_AREA_JACOBIAN),
+        }
+    }
+
+    /// The mapping's area factor `J` at image height `v`, relative to its maximum
+    /// (`sin θ` for lat-long, 1 for equal-area): what importance is multiplied by.
+    fn area_factor(self, v: f64) -> f64 {
+        match self {
+            Mapping::Equirectangular => (PI * v).sin(),
+            Mapping::EqualArea => 1.0,
+        }
+    }
+}
+
+/// How an [`EnvironmentLight`] is built and placed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightOptions {
+    /// Multiplies every radiance value (not the sampling density). Finite, ≥ 0.
+    pub scale: f32,
+    /// Light-to-world rotation: the map's +z goes to `rotation.apply(+z)`.
+    pub rotation: Rotation,
+    /// How radiance is reconstructed between texels; the importance is filtered to
+    /// cover this lookup's support.
+    pub lookup: Lookup,
+    /// How directions are drawn from the density.
+    pub sampler: Sampler,
+    /// The shape of the density.
+    pub density: Density,
+    /// The parameterization the light samples and looks up in. A lat-long input
+    /// with [`Mapping::EqualArea`] is resampled to an equal-area square.
+    pub mapping: Mapping,
+    /// What the image given to [`EnvironmentLight::new`] is: a lat-long map (2:1 by
+    /// convention) or an equal-area square (as PBRT-v4 writes them).
+    pub input_mapping: Mapping,
+    /// Side of the equal-area square a lat-long input is resampled to; `None` keeps
+    /// about the input's texel count ([`equal_area::default_size`]).
+    pub equal_area_size: Option<usize>,
+    /// MIS compensation (Karlík et al. 2019, as in PBRT-v4): sample
+    /// `max(0, Y − Ȳ) · J` instead of `Y · J`, where `Ȳ` is the map's mean
+    /// luminance per unit solid angle. The light then spends no samples on the
+    /// part of the environment that BSDF sampling handles well. **The density is 0
+    /// wherever `Y ≤ Ȳ`**, so the light alone no longer covers the whole sphere; use
+    /// it only as one technique in multiple importance sampling with a strategy that
+    /// does (BSDF sampling), where the combination stays unbiased. A map with
+    /// nothing above its mean (a constant map) keeps the ordinary density.
+    pub mis_compensation: bool,
+}
+
+impl Default for LightOptions {
+    fn default() -> Self {
+        Self {
+            scale: 1.0,
+            rotation: Rotation::IDENTITY,
+            lookup: Lookup::Bilinear,
+            sampler: Sampler::Inversion,
+            density: Density::PiecewiseConstant,
+            mapping: Mapping::Equirectangular,
+            input_mapping: Mapping::Equirectangular,
+            equal_area_size: None,
+            mis_compensation: false,
+        }
+    }
+}
+
+/// A direction drawn from the light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightSample {
+    /// World-space unit direction towards the light.
+    pub direction: Vec3,
+    /// Solid-angle density of `direction`, per steradian (always > 0 and finite).
+    pub pdf: f32,
+    /// Radiance arriving from `direction` (linear RGB, scale applied).
+    pub radiance: [f32; 3],
+    /// The image point `[u, v]` the direction came from (in the light's mapping).
+    pub uv: [f32; 2],
+}
+
+/// The 2D sampler over `[0, 1]²` behind a light.
+#[derive(Debug, Clone)]
+enum Planar {
+    Inversion(Distribution2D),
+    Alias(AliasTable2D),
+    Hierarchical(Hierarchical2D),
+    Bilinear(BilinearDistribution2D),
+}
+
+impl Planar {
+    #[inline(always)]
+    fn pdf(&self, uv: [f32; 2]) -> f32 {
+        match self {
+            Planar::Inversion(d) => d.pdf(uv),
+            Planar::Alias(d) => d.pdf(uv),
+            Planar::Hierarchical(d) => d.pdf(uv),
+            Planar::Bilinear(d) => d.pdf(uv),
+        }
+    }
+
+    #[inline]
+    fn invert(&self, uv: [f32; 2]) -> Option<[f32; 2]> {
+        match self {
+            Planar::Inversion(d) => Some(d.invert(uv)),
+            Planar::Alias(_) => None,
+            Planar::Hierarchical(d) => Some(d.invert(uv)),
+            Planar::Bilinear(d) => Some(d.invert(uv)),
+        }
+    }
+
+    fn integral(&self) -> f64 {
+        match self {
+            Planar::Inversion(d) => d.integral(),
+            Planar::Alias(d) => d.integral(),
+            Planar::Hierarchical(d) => d.integral(),
+            Planar::Bilinear(d) => d.integral(),
+        }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        match self {
+            Planar::Inversion(d) => d.memory_bytes(),
+            Planar::Alias(d) => d.memory_bytes(),
+            Planar::Hierarchical(d) => d.memory_bytes(),
+            Planar::Bilinear(d) => d.memory_bytes(),
+        }
+    }
+}
+
+/// An importance-sampled environment light.
+///
+/// `Send + Sync`; all queries take `&self` and allocate nothing.
+///
+/// ```
+/// use envlight::{EnvImage, EnvironmentLight, LightOptions};
+/// // The upper hemisphere is bright, the lower dark.
+/// let image = EnvImage::from_fn(8, 4, |_, y| if y < 2 { [1.0; 3] } else { [0.0; 3] }).unwrap();
+/// let light = EnvironmentLight::new(image, LightOptions::default()).unwrap();
+/// let s = light.sample([0.3, 0.6]).expect("a non-black map always samples");
+/// assert!((light.pdf(s.direction) - s.pdf).abs() <= 1e-4 * s.pdf);
+/// ```
+#[derive(Debug, Clone)]
+pub struct EnvironmentLight {
+    /// The radiance image in the light's mapping (resampled if the input differs).
+    image: EnvImage,
+    options: LightOptions,
+    world_to_light: Rotation,
+    /// False for the identity rotation, which the hot paths then skip.
+    rotated: bool,
+    planar: Planar,
+    /// `∫ L dω` of the unscaled image, per channel.
+    integral_rgb: [f64; 3],
+    /// Whether MIS compensation is in effect (asked for, and something was above
+    /// the mean).
+    compensated: bool,
+}
+
+impl EnvironmentLight {
+    /// The radiance image the light looks up, in its own mapping (for an
+    /// equal-area light built from a lat-long map, the resampled square).
+    pub fn image(&self) -> &EnvImage {
+        &self.image
+    }
+
+    /// The options the light was built with.
+    pub fn options(&self) -> &LightOptions {
+        &self.options
+    }
+
+    /// The parameterization of [`Self::image`] and of the `uv` of samples.
+    pub fn mapping(&self) -> Mapping {
+        self.options.mapping
+    }
+
+    /// True when the density is MIS-compensated ([`LightOptions::mis_compensation`]
+    /// was asked for and part of the map is above its mean luminance).
+    pub fn is_compensated(&self) -> bool {
+        self.compensated
+    }
+
+    /// True when the map emits no light: every pdf is 0 and nothing can be sampled.
+    pub fn is_black(&self) -> bool {
+        let integral = self.planar.integral();
+        integral.is_nan() || integral <= 0.0
+    }
+
+    /// Bytes of sampling data (excluding the image).
+    pub fn sampling_bytes(&self) -> usize {
+        self.planar.memory_bytes()
+    }
+
+    #[inline]
+    fn to_world(&self, d: Vec3) -> Vec3 {
+        if self.rotated {
+            self.options.rotation.apply(d)
+        } else {
+            d
+        }
+    }
+
+    #[inline]
+    fn to_light(&self, d: Vec3) -> Vec3 {
+        if self.rotated {
+            self.world_to_light.apply(d)
+        } else {
+            d
+        }
+    }
+
+    #[inline(always)]
+    fn lookup(&self, uv: [f32; 2]) -> [f32; 3] {
+        let l = self.image.lookup_wrapped(
+            uv[0],
+            uv[1],
+            self.options.lookup,
+            self.options.mapping.wrap(),
+        );
+        let s = self.options.scale;
+        [l[0] * s, l[1] * s, l[2] * s]
+    }
+
+    /// Draws a direction for `ξ ∈ [0, 1)²` with density ∝ importance.
+    ///
+    /// Returns `None` when the map is black (pdf 0), or when the point falls exactly
+    /// on a pole of the lat-long map, where the solid-angle density is unbounded (a
+    /// set of measure zero: about one `ξ` in 2²⁴ when the top or bottom row is lit).
+    #[inline(always)]
+    pub fn sample(&self, xi: [f32; 2]) -> Option<LightSample> {
+        // One dispatch on the sampler, each arm inlined whole: a second `match` on
+        // it further down (for the pdf) measured 2x slower on the default path.
+        match &self.planar {
+            Planar::Inversion(d) => {
+                // The texels the radiance lookup will read start loading while the
+                // row's CDF is searched.
+                let s = d.sample_continuous_hinted(xi, |uv| self.image.prefetch(uv[0], uv[1]));
+                self.finish_sample(s, false)
+            }
+            Planar::Alias(d) => {
+                let s = d.sample_continuous_hinted(xi, |uv| self.image.prefetch(uv[0], uv[1]));
+                self.finish_sample(s, false)
+            }
+            Planar::Hierarchical(d) => self.finish_sample(d.sample_continuous(xi), false),
+            Planar::Bilinear(d) => self.finish_sample(d.sample_continuous(xi), true),
+        }
+    }
+
+    /// The direction, pdf and radiance of the planar sample `s`. A continuous density
+    /// changes across the f32 rounding of the direction (by up to ~1e-3 relative
+    /// next to a bright texel), so its pdf is evaluated where the caller will
+    /// evaluate it: at the returned direction, bit for bit what [`Self::pdf`] gives.
+    /// A piecewise-constant density is exact at `s.uv`.
+    #[inline(always)]
+    fn finish_sample(&self, s: Sample2D, continuous_density: bool) -> Option<LightSample> {
+        if s.pdf == 0.0 {
+            return None;
+        }
+        let (local, jacobian) = self.options.mapping.to_direction(s.uv);
+        let direction = self.to_world(local);
+        let pdf = if continuous_density {
+            self.pdf(direction)
+        } else {
+            s.pdf / jacobian
+        };
+        if !(jacobian > 0.0 && is_positive_finite(pdf)) {
+            return None;
+        }
+        Some(LightSample {
+            direction,
+            pdf,
+            radiance: self.lookup(s.uv),
+            uv: s.uv,
+        })
+    }
+
+    /// The solid-angle density (per steradian) with which [`Self::sample`] produces
+    /// the world-space unit direction `direction`; 0 where the light is black, at the
+    /// poles of a lat-long map, and for a black map.
+    #[inline]
+    pub fn pdf(&self, direction: Vec3) -> f32 {
+        // One dispatch on the sampler, each arm inlined whole (see `sample`).
+        match &self.planar {
+            Planar::Inversion(d) => self.solid_angle_pdf(direction, |uv| d.pdf(uv)),
+            Planar::Alias(d) => self.solid_angle_pdf(direction, |uv| d.pdf(uv)),
+            Planar::Hierarchical(d) => self.solid_angle_pdf(direction, |uv| d.pdf(uv)),
+            Planar::Bilinear(d) => self.solid_angle_pdf(direction, |uv| d.pdf(uv)),
+        }
+    }
+
+    /// `planar_pdf(uv) / (dω/du dv)` at the image point of `direction`.
+    #[inline(always)]
+    fn solid_angle_pdf(&self, direction: Vec3, planar_pdf: impl Fn([f32; 2]) -> f32) -> f32 {
+        let (uv, inv_jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+        solid_angle(planar_pdf(uv), inv_jacobian)
+    }
+
+    /// Radiance arriving from the world-space unit direction `direction` (for rays
+    /// that escape the scene): the image lookup, times the scale.
+    #[inline]
+    pub fn radiance(&self, direction: Vec3) -> [f32; 3] {
+        self.lookup(self.direction_to_uv(direction))
+    }
+
+    /// The image point `[u, v]` (in the light's mapping) that looks along the world
+    /// direction `direction`.
+    #[inline]
+    pub fn direction_to_uv(&self, direction: Vec3) -> [f32; 2] {
+        self.options.mapping.to_uv(self.to_light(direction)).0
+    }
+
+    /// The world direction at image point `[u, v]` (in the light's mapping).
+    #[inline]
+    pub fn uv_to_direction(&self, uv: [f32; 2]) -> Vec3 {
+        self.to_world(self.options.mapping.to_direction(uv).0)
+    }
+
+    /// The sample-space point `ξ` that [`Self::sample`] maps to `direction` (the
+    /// exact inverse of sampling, up to float rounding); `None` for the alias
+    /// sampler, which has no inverse.
+    #[inline]
+    pub fn invert(&self, direction: Vec3) -> Option<[f32; 2]> {
+        self.planar.invert(self.direction_to_uv(direction))
+    }
+
+    /// `∫ L dω` over the sphere per channel (scale applied), exact for the chosen
+    /// lookup: each row's mean times the solid angle its reconstruction covers.
+    pub fn integral_rgb(&self) -> [f64; 3] {
+        let s = self.options.scale as f64;
+        self.integral_rgb.map(|c| c * s)
+    }
+
+    /// `∫ Y dω` over the sphere (scale applied).
+    pub fn integral_luminance(&self) -> f64 {
+        let [r, g, b] = self.integral_rgb();
+        let w = crate::color::LUMINANCE_WEIGHTS;
+        w[0] as f64 * r + w[1] as f64 * g + w[2] as f64 * b
+    }
+
+    /// Power emitted into a scene of bounding radius `scene_radius`:
+    /// `Φ = π r² ∫ L dω` per channel.
+    pub fn power(&self, scene_radius: f64) -> [f64; 3] {
+        let area = PI * scene_radius * scene_radius;
+        self.integral_rgb().map(|c| c * area)
+    }
+
+    /// The brightest texel's luminance (scale applied) and the world direction of
+    /// its centre.
+    pub fn brightest(&self) -> (f32, Vec3) {
+        let (w, h) = (self.image.width(), self.image.height());
+        let (x, row, y) = self.image.brightest_texel();
+        let uv = [(x as f32 + 0.5) / w as f32, (row as f32 + 0.5) / h as f32];
+        (y * self.options.scale, self.uv_to_direction(uv))
+    }
+}
+
+/// The solid-angle density from the planar one at a direction's image point and
+/// the reciprocal Jacobian there: 0 at a pole (infinite `1/J`), for a NaN from a
+/// degenerate direction, and for a NaN or infinite product.
+#[inline(always)]
+fn solid_angle(planar_pdf: f32, inv_jacobian: f32) -> f32 {
+    let pdf = planar_pdf * inv_jacobian;
+    if inv_jacobian < f32::INFINITY && pdf < f32::INFINITY {
+        pdf
+    } else {
+        0.0
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Crate-internal hooks for `crate::product`, kept together here on purpose: the
+// product sampler builds its own fine level from this light's importance and maps
+// image points to directions exactly as the light does.
+// ---------------------------------------------------------------------------
+
+impl EnvironmentLight {
+    /// Rows `first_row..first_row + out.len() / w` of the texel-grid importance of
+    /// DESIGN.md §4 step 1 (`Y(filtered) · J_j`, never MIS-compensated), `w` values
+    /// per row, whatever the light's sampler and density.
+    pub(crate) fn importance_rows(&self, first_row: usize, out: &mut [f32]) {
+        let w = self.image.width();
+        let mut cache = LuminanceRows::new(w);
+        for (k, row) in out.chunks_exact_mut(w).enumerate() {
+            let (lookup, mapping) = (self.options.lookup, self.options.mapping);
+            importance_row(&self.image, lookup, mapping, &mut cache, first_row + k, row);
+        }
+    }
+
+    /// The light-frame unit direction at image point `uv` and `dω / du dv` there.
+    #[inline(always)]
+    pub(crate) fn uv_to_local(&self, uv: [f32; 2]) -> (Vec3, f32) {
+        self.options.mapping.to_direction(uv)
+    }
+
+    /// The image point of a light-frame direction and `du dv / dω` there.
+    #[inline(always)]
+    pub(crate) fn local_to_uv(&self, d: Vec3) -> ([f32; 2], f32) {
+        self.options.mapping.to_uv(d)
+    }
+
+    /// A light-frame direction in the world frame.
+    #[inline(always)]
+    pub(crate) fn local_to_world(&self, d: Vec3) -> Vec3 {
+        self.to_world(d)
+    }
+
+    /// A world direction in the light frame.
+    #[inline(always)]
+    pub(crate) fn world_to_local(&self, d: Vec3) -> Vec3 {
+        self.to_light(d)
+    }
+
+    /// The radiance lookup at image point `uv` (scale applied).
+    #[inline(always)]
+    pub(crate) fn radiance_at_uv(&self, uv: [f32; 2]) -> [f32; 3] {
+        self.lookup(uv)
+    }
+}
+
+/// [`solid_angle`] for `crate::product`.
+#[inline(always)]
+pub(crate) fn solid_angle_density(planar_pdf: f32, inv_jacobian: f32) -> f32 {
+    solid_angle(planar_pdf, inv_jacobian)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn constant_map_integrates_to_4pi_and_has_uniform_pdf() {
+        let image = EnvImage::from_fn(16, 8, |_, _| [2.0, 2.0, 2.0]).unwrap();
+        let light = EnvironmentLight::new(image, LightOptions::default()).unwrap();
+        let i = light.integral_rgb();
+        assert!((i[0] - 8.0 * PI).abs() < 1e-6, "{i:?}");
+        // Importance ∝ sin θ at row centres: pdf is uniform 1/4π up to the
+        // piecewise-constant approximation of sin θ.
+        let p = light.pdf(Vec3::new(1.0, 0.0, 0.0));
+        // Importance is sin θ at row centres, so I = (1/h) Σ sin((j+½)π/h) =
+        // 1 / (h sin(π/2h)), and at the equator (a row boundary for h = 8) the cell
+        // holds sin(4.5π/8) while the true sin θ is 1.
+        let integral = 1.0 / (8.0 * (PI / 16.0).sin());
+        let expected = (4.5 * PI / 8.0).sin() / (integral * 2.0 * PI * PI);
+        assert!(
+            (p as f64 / expected - 1.0).abs() < 1e-5,
+            "{p} vs {expected}"
+        );
+        // Analytic: (4π)² / (I (2π²)² Σ_j ∫_row sin²(πv) dv / sin θ_j) = 0.9678449 for
+        // h = 8 (the piecewise-constant sin θ is the only mismatch).
+        let e = light.efficiency();
+        assert!((e - 0.967_844_9).abs() < 1e-5, "{e}");
+    }
+
+    #[test]
+    fn rotation_moves_the_light() {
+        // One bright column at u = 0 (+x); rotated by 90° it should sit at +y.
+        let image =
+            EnvImage::from_fn(8, 4, |x, _| if x == 0 { [1.0; 3] } else { [0.0; 3] }).unwrap();
+        let options = LightOptions {
+            rotation: Rotation::about_z_degrees(90.0),
+            lookup: Lookup::Nearest,
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(image, options).unwrap();
+        let d = Vec3::new(-0.02, 1.0, 0.1).normalized().unwrap();
+        assert!(light.pdf(d) > 0.0 && light.radiance(d)[0] == 1.0);
+        let x = Vec3::new(1.0, 0.02, 0.1).normalized().unwrap();
+        assert_eq!(light.pdf(x), 0.0);
+        let s = light.sample([0.5, 0.5]).unwrap();
+        assert!(s.direction.y > 0.9, "{s:?}");
+    }
+
+    #[test]
+    fn black_map_never_samples() {
+        let image = EnvImage::from_fn(4, 2, |_, _| [0.0; 3]).unwrap();
+        let light = EnvironmentLight::new(image, LightOptions::default()).unwrap();
+        assert!(light.sample([0.5, 0.5]).is_none());
+        assert_eq!(light.pdf(Vec3::new(0.0, 0.0, 1.0)), 0.0);
+        assert_eq!(light.efficiency(), 0.0);
+    }
+}
