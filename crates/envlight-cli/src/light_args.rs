@@ -2,6 +2,7 @@
 //! (used with `#[command(flatten)]`), and building the light from them.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, Context};
@@ -193,7 +194,7 @@ pub struct Input {
 /// A built light and what was learnt while building it.
 pub struct Loaded {
     /// The light.
-    pub light: EnvironmentLight,
+    pub light: Arc<EnvironmentLight>,
     /// The map as the user named it (a path or `builtin:NAME`), for messages.
     pub name: String,
     /// `builtin`, or the decoded file format (`hdr`, `exr`, `pfm`, `png`, `jpeg`).
@@ -411,7 +412,7 @@ impl LightArgs {
             ));
         }
         Ok(Loaded {
-            light,
+            light: Arc::new(light),
             name,
             format,
             input_width,

@@ -39,6 +39,7 @@ mod csv;
 mod light_args;
 mod output;
 mod progress;
+mod shading;
 
 /// Importance-sampled HDR environment lighting: inspect a map, draw directions with
 /// their exact pdf, evaluate pdfs, picture the sampling density and verify it.

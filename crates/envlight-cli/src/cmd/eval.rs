@@ -15,6 +15,7 @@ use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::light_args::LightArgs;
 use crate::output::{open_input, write_bytes, Output};
 use crate::progress::Progress;
+use crate::shading::{product_sampler, Density, NormalArgs};
 
 /// Lines read before a batch is processed.
 const BATCH_LINES: usize = 1 << 16;
@@ -32,13 +33,17 @@ tolerated, blank lines are skipped; fields must not contain commas. Each directi
 normalised (it need not be unit length) and must be finite and non-zero.\n\n\
 Output: CSV with the header line exactly `x,y,z,pdf,r,g,b`, then one row per input row, \
 in order: the normalised world-space direction, the solid-angle pdf (sr⁻¹) with which \
-`envlight sample` draws it, and the radiance arriving from it. A bad row stops the \
+`envlight sample` draws it (with --normal, the product sampler's pdf for that surface \
+normal), and the radiance arriving from it. A bad row stops the \
 command with an error naming its line; with -o no output file is left behind.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// CSV file of directions, or - for stdin.
     #[arg(long, value_name = "FILE|-")]
@@ -70,6 +75,8 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
 
     let loaded = args.light.load()?;
     let light = &loaded.light;
+    let product = product_sampler(light, args.normal.normal);
+    let density = Density::new(light, product.as_ref(), args.normal.normal);
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 
@@ -95,7 +102,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             .step_by(TASK_LINES)
             .map(|first| {
                 let last = (first + TASK_LINES).min(batch.len());
-                eval_lines(light, &columns, &batch, first..last, &source)
+                eval_lines(light, &density, &columns, &batch, first..last, &source)
             })
             .collect();
         for result in results {
@@ -204,6 +211,7 @@ fn field(raw: &str) -> &str {
 /// Evaluates lines `range` of `batch` into output rows; the first bad line is an error.
 fn eval_lines(
     light: &EnvironmentLight,
+    density: &Density,
     columns: &Columns,
     batch: &Batch,
     range: std::ops::Range<usize>,
@@ -229,7 +237,7 @@ fn eval_lines(
             &mut buf,
             &mut fmt,
             d.to_array(),
-            light.pdf(d),
+            density.pdf(d),
             light.radiance(d),
         );
     }

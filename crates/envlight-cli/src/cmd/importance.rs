@@ -20,6 +20,7 @@ use rayon::prelude::*;
 use super::Outcome;
 use crate::light_args::LightArgs;
 use crate::output::Output;
+use crate::shading::{product_sampler, Density, NormalArgs};
 
 /// Arguments of `envlight importance`.
 #[derive(Debug, clap::Args)]
@@ -30,13 +31,18 @@ scale (viridis; black where p = 0) with its colour bar. Both panels are the \
 equirectangular world view: θ (0° = +z, up) runs down the side, φ (0° = +x, 90° = +y) \
 along the bottom, whatever --mapping the light uses. With --samples N the first N \
 directions `envlight sample` would draw (same --seed) are drawn as magenta dots on both \
-panels. Each pixel is the solid-angle weighted mean of radiance and pdf over points in \
+panels. With --normal the lower panel is the product sampler's density for a surface \
+with that normal (radiance × max(0, n·ω), DESIGN.md §6a), and the dots its samples. \
+Each pixel is the solid-angle weighted mean of radiance and pdf over points in \
 it, enough to see every texel of maps wider than --width.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// The PNG file to write (atomically).
     #[arg(short = 'o', long = "output", value_name = "FILE.png")]
@@ -69,14 +75,16 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let light = &loaded.light;
     let pw = args.width as usize;
     let ph = (pw / 2).max(1);
+    let product = product_sampler(light, args.normal.normal);
+    let density = Density::new(light, product.as_ref(), args.normal.normal);
 
-    let panels = Panels::new(light, pw, ph);
+    let panels = Panels::new(light, &density, pw, ph);
     let exposure = panels.exposure();
     let (lo, hi) = panels.log_pdf_range();
     let dots: Vec<(usize, usize)> = (0..args.samples)
         .into_par_iter()
         .filter_map(|k| {
-            let s = light.sample(envlight::rng::xi_2d(args.seed, k))?;
+            let s = density.sample(envlight::rng::xi_2d(args.seed, k))?;
             let [u, v] = direction_to_equirect(s.direction);
             let x = ((u as f64 * pw as f64) as usize).min(pw - 1);
             let y = ((v as f64 * ph as f64) as usize).min(ph - 1);
@@ -109,7 +117,10 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     canvas.blit(layout.left, layout.top1, pw, ph, &map_pixels);
 
     // Panel 2: the density.
-    let mut density_title = "SAMPLING PDF PER SR, LOG SCALE".to_string();
+    let mut density_title = match args.normal.normal {
+        Some(n) => format!("PRODUCT PDF, N=({:.2},{:.2},{:.2}), LOG", n.x, n.y, n.z),
+        None => "SAMPLING PDF PER SR, LOG SCALE".to_string(),
+    };
     if loaded.black {
         density_title.push_str("  (ALL BLACK: PDF 0)");
     }
@@ -190,7 +201,7 @@ impl Panels {
     /// resolution as a lat-long grid (2N × N for an N × N equal-area light) over
     /// the panel's. Asking the light about world directions shows whatever mapping
     /// and density it uses, and `--rotate` exactly.
-    fn new(light: &EnvironmentLight, pw: usize, ph: usize) -> Self {
+    fn new(light: &EnvironmentLight, density: &Density, pw: usize, ph: usize) -> Self {
         let image = light.image();
         let (gw, gh) = match light.mapping() {
             Mapping::Equirectangular => (image.width(), image.height()),
@@ -220,7 +231,7 @@ impl Panels {
                             for (a, c) in rgb.iter_mut().zip(l) {
                                 *a += c as f64 * band;
                             }
-                            pdf += light.pdf(d) as f64 * band;
+                            pdf += density.pdf(d) as f64 * band;
                             total += band;
                         }
                     }

@@ -7,12 +7,16 @@ use anyhow::Context;
 use envlight::equal_area::square_to_sphere;
 use envlight::light::Mapping;
 use envlight::mapping::equirect_to_direction;
-use envlight::{EnvImage, LightOptions, Vec3};
+use std::sync::Arc;
+
+use envlight::{EnvImage, EnvironmentLight, Factor, LightOptions, Vec3};
+use envlight_verify::{efficiency, AtShadingPoint, Integrand, Reference};
 use serde_json::json;
 
 use super::Outcome;
 use crate::light_args::{choice_name, LightArgs};
 use crate::output::Output;
+use crate::shading::{product_sampler, NormalArgs};
 
 /// Arguments of `envlight info`.
 #[derive(Debug, clap::Args)]
@@ -26,12 +30,18 @@ power_unit_radius ([R,G,B] power π r² ∫L dω for r = 1), max_luminance (of t
 brightest texel as read, times --scale), \
 brightest_direction ([x,y,z], the centre of the map's brightest texel, as read), efficiency \
 ((∫Y dω)² / ∫(Y²/p) dω; 1 means pdf ∝ luminance), sampling_bytes, load_ms, build_ms, \
-efficiency_ms, negative_texels, most_negative, non_finite_texels, black.\n\n",
+efficiency_ms, negative_texels, most_negative, non_finite_texels, black. With --normal \
+also: normal (the unit normal), irradiance (∫Y max(0, n·ω) dω), product_efficiency and \
+light_efficiency ((∫Y cos⁺)² / ∫(Y cos⁺)²/p dω with the product sampler's pdf and with \
+the light's own; their ratio of 1/e − 1 is the variance gain), product_ms.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// Print one JSON object instead of the readable summary.
     #[arg(long)]
@@ -58,10 +68,11 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let efficiency = light.efficiency();
     let efficiency_ms = started.elapsed().as_secs_f64() * 1e3;
     let brightest = brightest.to_array();
+    let shading = args.normal.normal.map(|n| Shading::measure(light, n));
 
     let mut out = Output::create(None)?;
     let text = if args.json {
-        let value = json!({
+        let mut value = json!({
             "map": loaded.name,
             "width": width,
             "height": height,
@@ -90,6 +101,13 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             "non_finite_texels": loaded.sanitized.non_finite_texels,
             "black": loaded.black,
         });
+        if let (Some(s), Some(object)) = (&shading, value.as_object_mut()) {
+            object.insert("normal".into(), json!(s.normal.to_array()));
+            object.insert("irradiance".into(), json!(s.irradiance));
+            object.insert("product_efficiency".into(), json!(s.product_efficiency));
+            object.insert("light_efficiency".into(), json!(s.light_efficiency));
+            object.insert("product_ms".into(), json!(s.ms));
+        }
         let mut text = serde_json::to_string_pretty(&value).context("cannot format JSON")?;
         text.push('\n');
         text
@@ -190,6 +208,22 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
                 ),
             ));
         }
+        if let Some(s) = &shading {
+            let n = s.normal;
+            lines.push(("normal", format!("({:.5}, {:.5}, {:.5})", n.x, n.y, n.z)));
+            lines.push((
+                "irradiance",
+                format!("{} (∫Y max(0, n·ω) dω)", s.irradiance),
+            ));
+            lines.push((
+                "product",
+                format!(
+                    "efficiency {:.5} with the product sampler, {:.5} with the light alone \
+                     ((∫Y cos⁺)² / ∫(Y cos⁺)²/p dω), {:.1} ms",
+                    s.product_efficiency, s.light_efficiency, s.ms
+                ),
+            ));
+        }
         if loaded.black {
             lines.push(("note", "all black: no light, every pdf is 0".to_string()));
         }
@@ -233,4 +267,37 @@ fn brightest_texel(image: &EnvImage, options: &LightOptions) -> (f32, Vec3) {
         options.rotation.apply(local)
     };
     (y * options.scale, world)
+}
+
+/// The figures of `--normal`: the irradiance integrand `Y·max(0, n·ω)` integrated,
+/// and the efficiency for it of the product sampler's pdf and of the light's own.
+struct Shading {
+    normal: Vec3,
+    irradiance: f64,
+    product_efficiency: f64,
+    light_efficiency: f64,
+    /// Time to build the product sampler and integrate, in milliseconds.
+    ms: f64,
+}
+
+impl Shading {
+    fn measure(light: &Arc<EnvironmentLight>, normal: Vec3) -> Self {
+        let started = Instant::now();
+        let product = product_sampler(light, Some(normal));
+        let at = product
+            .as_ref()
+            .map(|p| AtShadingPoint::new(p, Factor::cosine(normal)));
+        let integrand = Integrand::clamped_cosine(normal);
+        let light_only = efficiency(light.as_ref(), &integrand, Reference::Midpoint);
+        let product_efficiency = at.as_ref().map_or(0.0, |a| {
+            efficiency(a, &integrand, Reference::Midpoint).efficiency
+        });
+        Self {
+            normal,
+            irradiance: light_only.integral,
+            product_efficiency,
+            light_efficiency: light_only.efficiency,
+            ms: started.elapsed().as_secs_f64() * 1e3,
+        }
+    }
 }

@@ -13,6 +13,7 @@ use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::light_args::{warn, LightArgs};
 use crate::output::{write_bytes, Output};
 use crate::progress::Progress;
+use crate::shading::{product_sampler, Density, NormalArgs};
 
 /// Rows formatted by one task.
 const CHUNK_ROWS: u64 = 8192;
@@ -26,12 +27,17 @@ the world-space unit direction (x, y, z), its solid-angle pdf in sr⁻¹, and th
 so `envlight eval` on these rows reproduces them exactly. Numbers are the shortest decimals that read back as the \
 same 32-bit floats. Row k uses the k-th point of the seed's counter-based sequence, so \
 the output depends only on MAP, the light options, N and the seed (not on the thread \
-count). An all-black map has pdf 0 and radiance 0 on every row.\n\n",
+count). An all-black map has pdf 0 and radiance 0 on every row. With --normal the \
+directions come from the product sampler for that surface normal and pdf is its density \
+(rows where nothing lit faces the surface have pdf 0).\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// Number of directions to draw.
     #[arg(short = 'n', value_name = "N")]
@@ -50,6 +56,8 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let loaded = args.light.load()?;
     let light = &loaded.light;
+    let product = product_sampler(light, args.normal.normal);
+    let density = Density::new(light, product.as_ref(), args.normal.normal);
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 
@@ -67,7 +75,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             .map(|chunk| {
                 let start = chunk * CHUNK_ROWS;
                 let end = (start + CHUNK_ROWS).min(args.count);
-                let rows = format_rows(light, args.seed, start..end);
+                let rows = format_rows(light, &density, args.seed, start..end);
                 progress.inc(end - start);
                 rows
             })
@@ -80,7 +88,13 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     }
     progress.finish();
     out.finish()?;
-    if failed > 0 && !loaded.black {
+    if failed > 0 && !loaded.black && args.normal.normal.is_some() {
+        warn(&format!(
+            "{}: {failed} of {} sample points gave no direction (a pole, or no light \
+             above the surface); written with pdf 0 and radiance 0",
+            loaded.name, args.count
+        ));
+    } else if failed > 0 && !loaded.black {
         warn(&format!(
             "{}: {failed} of {} sample points fell where the density is 0 (a pole); \
              written with pdf 0 and radiance 0",
@@ -93,6 +107,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
 /// Formats rows `range`; returns the bytes and how many rows had no sample.
 fn format_rows(
     light: &envlight::EnvironmentLight,
+    density: &Density,
     seed: u64,
     range: std::ops::Range<u64>,
 ) -> (Vec<u8>, u64) {
@@ -101,7 +116,7 @@ fn format_rows(
     let mut misses = 0;
     for k in range {
         let xi = envlight::rng::xi_2d(seed, k);
-        match light.sample(xi) {
+        match density.sample(xi) {
             Some(s) => {
                 // Every value is evaluated at the direction as written (f32), exactly
                 // as `eval` does, so feeding the rows back gives identical numbers.
@@ -110,7 +125,7 @@ fn format_rows(
                 // up to ~1e-4 relative. Only if rounding lands in a zero cell (pdf()
                 // says "no sample" for a real one) keep the sampler's values.
                 let d = s.direction;
-                let pdf = light.pdf(d);
+                let pdf = density.pdf(d);
                 let (pdf, radiance) = if pdf > 0.0 {
                     (pdf, light.radiance(d))
                 } else {

@@ -5,12 +5,16 @@
 use std::io::Write;
 
 use anyhow::Context;
-use envlight_verify::{format_table, Config, Integrand, Lobes, Reference, Row, Verdict};
+use envlight::Factor;
+use envlight_verify::{
+    format_table, AtShadingPoint, Config, Integrand, Lobes, Reference, Row, SphereSampler, Verdict,
+};
 
 use super::Outcome;
 use crate::light_args::LightArgs;
 use crate::output::Output;
 use crate::progress::Progress;
+use crate::shading::{product_sampler, NormalArgs};
 
 /// Arguments of `envlight verify`.
 #[derive(Debug, clap::Args)]
@@ -35,12 +39,19 @@ radiance).\n\
   support          p > 0 wherever L > 0, probed at every cell's centre and 2% in from its \
 corners.\n\
   efficiency       (∫Y dω)² / ∫(Y²/p) dω, reported only (1 means pdf ∝ luminance).\n\
-An all-black map has nothing to check: the checks are skipped.\n\n",
+With --normal the checks run on the product sampler for that surface normal, against \
+its integrand Y·max(0, n·ω) instead of Y (the `unbiased` rows name it), and `invert` is \
+skipped (it has no inverse).\n\n\
+An all-black map has nothing to check, nor a normal that no light faces: the checks are \
+skipped.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// Number of sample directions (for each sampling check).
     #[arg(long, value_name = "N", default_value_t = 200_000,
@@ -61,11 +72,22 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let loaded = args.light.load()?;
     let light = &loaded.light;
     let n = args.samples as usize;
-    let rows: Vec<Row> = if loaded.black {
+    let product = product_sampler(light, args.normal.normal);
+    let at = product
+        .as_ref()
+        .zip(args.normal.normal)
+        .map(|(p, normal)| AtShadingPoint::new(p, Factor::cosine(normal)));
+    let unlit = at.as_ref().is_some_and(|a| a.weight_sum() == 0.0);
+    let skipped = |why: &str| -> Vec<Row> {
         envlight_verify::CHECKS
             .into_iter()
-            .map(|check| Row::new(check, "map is all black", "-", 0, Verdict::Skip))
+            .map(|check| Row::new(check, why, "-", 0, Verdict::Skip))
             .collect()
+    };
+    let rows: Vec<Row> = if loaded.black {
+        skipped("map is all black")
+    } else if unlit {
+        skipped("no light faces the surface")
     } else {
         let config = Config {
             pdf_tolerance: PDF_TOLERANCE,
@@ -73,19 +95,32 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             reference: Reference::Midpoint,
             ..Config::with_samples(n, args.seed)
         };
+        let (sampler, integrand, name): (&dyn SphereSampler, Integrand, &str) = match &at {
+            Some(a) => (a, a.integrand(), "product"),
+            None => (
+                light.as_ref(),
+                Integrand::luminance(),
+                light.options().sampler.name(),
+            ),
+        };
         let progress = Progress::bar(5, "verifying");
-        let report = envlight_verify::run(light, &Integrand::luminance(), &config, &|step| {
+        let report = envlight_verify::run(sampler, &integrand, &config, &|step| {
             progress.set_message(step);
             progress.inc(1);
         });
         progress.finish();
-        report.rows(light.options().sampler.name())
+        report.rows(name)
     };
 
     let failed = rows.iter().filter(|r| r.verdict == Verdict::Fail).count();
     let mut text = format_table(&rows);
     text.push_str(&if loaded.black {
         format!("{}: all black, nothing to verify\n", loaded.name)
+    } else if unlit {
+        format!(
+            "{}: no light faces the surface, nothing to verify\n",
+            loaded.name
+        )
     } else if failed == 0 {
         format!(
             "{}: all checks passed ({n} samples, seed {})\n",
