@@ -1,0 +1,114 @@
+//! Per-shading-point cost of product sampling against one light-only sample, on
+//! one thread: `cargo run --release -p envlight --example product_cost [-- MAP]`.
+//!
+//! Rows (ns per shading point, the best of several rounds over 65 536 points with
+//! random normals and ξ):
+//! - `light sample`: one `EnvironmentLight::sample` (the yardstick);
+//! - `light sample + pdf`: that plus one `pdf` (what a renderer's MIS pays);
+//! - `product at + sample + pdf`: a new shading point (`ShadingPoint::set_factor`),
+//!   one product sample and one product pdf;
+//! - `product sample + pdf, point reused`: the same shading point for 16 samples;
+//! - `product sample_batch + pdf_batch`: the batch calls, one factor per point.
+
+use envlight::load::{load, LoadOptions};
+use envlight::{
+    builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
+};
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::Instant;
+
+const POINTS: usize = 1 << 16;
+const ROUNDS: usize = 7;
+
+fn best(mut f: impl FnMut() -> f64) -> f64 {
+    (0..ROUNDS).map(|_| f()).fold(f64::INFINITY, f64::min)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let image = match std::env::args().nth(1) {
+        Some(path) => load(path.as_ref(), &LoadOptions::default())?.image,
+        None => builtin::sky(1024, 512),
+    };
+    let light = Arc::new(EnvironmentLight::new(image, LightOptions::default())?);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut rng = envlight::rng::SplitMix64::new(7);
+    let normals: Vec<Vec3> = (0..POINTS)
+        .map(|_| envlight::math::uniform_sphere([rng.next_f32(), rng.next_f32()]))
+        .collect();
+    let xi: Vec<[f32; 2]> = (0..POINTS)
+        .map(|_| [rng.next_f32(), rng.next_f32()])
+        .collect();
+    let factors: Vec<Factor> = normals.iter().map(|&n| Factor::cosine(n)).collect();
+    let per_point = |start: Instant| start.elapsed().as_secs_f64() * 1e9 / POINTS as f64;
+
+    let light_sample = best(|| {
+        let start = Instant::now();
+        for x in &xi {
+            black_box(light.sample(*x));
+        }
+        per_point(start)
+    });
+    let light_sample_pdf = best(|| {
+        let start = Instant::now();
+        for x in &xi {
+            if let Some(s) = light.sample(*x) {
+                black_box(light.pdf(s.direction));
+            }
+        }
+        per_point(start)
+    });
+    println!("light sample: {light_sample:.1} ns; light sample + pdf: {light_sample_pdf:.1} ns");
+
+    for top_nodes in [64, 128, 256, 512, 1024] {
+        let options = ProductOptions {
+            top_nodes: Some(top_nodes),
+            ..Default::default()
+        };
+        let sampler = ProductSampler::new(light.clone(), options);
+        let mut point = sampler.at(&factors[0]);
+        let fresh = best(|| {
+            let start = Instant::now();
+            for (f, x) in factors.iter().zip(&xi) {
+                point.set_factor(f);
+                if let Some(s) = point.sample(*x) {
+                    black_box(point.pdf(s.direction));
+                }
+            }
+            per_point(start)
+        });
+        let reused = best(|| {
+            let start = Instant::now();
+            for (k, x) in xi.iter().enumerate() {
+                point.set_factor(&factors[k / 16]);
+                if let Some(s) = point.sample(*x) {
+                    black_box(point.pdf(s.direction));
+                }
+            }
+            per_point(start)
+        });
+        let mut out = vec![None; POINTS];
+        let mut pdfs = vec![0.0f32; POINTS];
+        let batch = best(|| {
+            pool.install(|| {
+                let start = Instant::now();
+                sampler.sample_batch(&factors, &xi, &mut out);
+                let dirs: Vec<Vec3> = out
+                    .iter()
+                    .map(|s| s.map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction))
+                    .collect();
+                sampler.pdf_batch(&factors, &dirs, &mut pdfs);
+                per_point(start)
+            })
+        });
+        println!(
+            "cut {top_nodes:>4} ({} nodes): product at + sample + pdf {fresh:.0} ns ({:.1}x light sample), \
+             point reused for 16 samples {reused:.0} ns ({:.1}x), batch {batch:.0} ns ({:.1}x)",
+            sampler.cut_len(),
+            fresh / light_sample,
+            reused / light_sample,
+            batch / light_sample
+        );
+    }
+    Ok(())
+}
