@@ -654,7 +654,7 @@ impl ProductSampler {
         while let Some((level, i, j)) = stack.pop() {
             let (nodes, size) = level_of(level);
             let power = nodes[j * size[0] + i].power;
-            if !(power > 0.0) {
+            if power.is_nan() || power <= 0.0 {
                 continue;
             }
             if level == depth || power <= 1.0 / top_nodes as f64 {
@@ -831,7 +831,7 @@ impl ProductSampler {
     /// bound at the cone's axis alone for [`PatchBound::AxisOnly`]).
     #[inline]
     fn weight(&self, target: &Target, node: &Patch) -> f64 {
-        if !(node.power > 0.0) {
+        if node.power.is_nan() || node.power <= 0.0 {
             return 0.0;
         }
         let bound = if self.bound == PatchBound::AxisOnly {
@@ -1052,7 +1052,7 @@ impl ShadingPoint<'_> {
             let (w, first) = sampler.child_weights(target, level, i, j);
             let rows = [w[0][0] + w[0][1], w[1][0] + w[1][1]];
             let total = rows[0] + rows[1];
-            if !(total > 0.0) {
+            if total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 return None;
             }
             let b;
