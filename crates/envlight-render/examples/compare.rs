@@ -7,13 +7,17 @@
 //! ```
 //!
 //! `ENVLIGHT_SEED=N` picks the seed, `ENVLIGHT_REFERENCE=FILE` reuses a reference
-//! render, `ENVLIGHT_DUMP=DIR` saves the reference and every render.
+//! render, `ENVLIGHT_DUMP=DIR` saves the reference and every render, and
+//! `ENVLIGHT_STRATEGIES=mis,mis-product` renders only those strategies (a smaller
+//! sheet).
 //!
 //! The map is read as a linear `.exr`/`.pfm` (negative texels clamped); `builtin:sky`
 //! selects the procedural sky.
 
 use envlight::{EnvImage, EnvironmentLight, LightOptions};
-use envlight_render::{compare, read_image, write_image, CompareSettings, RenderSettings, Scene};
+use envlight_render::{
+    compare, read_image, write_image, CompareSettings, RenderSettings, Scene, Strategy,
+};
 use std::path::Path;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -47,6 +51,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         image
     };
     let light = EnvironmentLight::new(image, LightOptions::default())?;
+    let strategies = match std::env::var("ENVLIGHT_STRATEGIES") {
+        Ok(list) => list
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<Vec<Strategy>, _>>()?,
+        Err(_) => Strategy::ALL.to_vec(),
+    };
     let settings = CompareSettings {
         render: RenderSettings {
             seed: std::env::var("ENVLIGHT_SEED")
@@ -58,9 +69,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             spp,
             ..Default::default()
         },
+        strategies,
         equal_time,
         reference_spp,
-        ..Default::default()
     };
     let progress = |stage: &str, done: u64, total: u64| {
         if done == total {

@@ -25,7 +25,7 @@
 use crate::rgb::{add, scale, Rgb};
 use crate::warp::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use envlight::color::luminance;
-use envlight::Vec3;
+use envlight::{Factor, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
 /// The smallest GGX roughness used: below it `D` overflows `f32` near the peak.
@@ -158,6 +158,33 @@ impl Bsdf {
             f: self.eval(wo, wi),
             pdf,
         })
+    }
+
+    /// The factor `f` of the product sampler's target `L(ω) f(ω)` at a surface point
+    /// with (world) normal `normal`, facing the viewer, and outgoing direction
+    /// `wo_world` (DESIGN.md §6a). Only a sampling target: a light sample drawn with
+    /// it is weighted by the true `f(ωo, ωi) cos θi / p(ωi)`.
+    ///
+    /// - `Diffuse`: the clamped cosine `max(0, n·ω)`, which is exactly the BRDF
+    ///   times the cosine up to the constant albedo.
+    /// - `Conductor`: the cosine times the GGX lobe proxy about the mirror direction
+    ///   of `ωo`, with the surface's roughness (clamped into `[MIN_ALPHA, 1]`, the
+    ///   proxy's domain; at α = 1 the proxy is flat and the target is the cosine).
+    /// - `Plastic`: the clamped cosine. The target is one lobe, and the base, which
+    ///   returns most of a plastic's light except near grazing, spreads over the
+    ///   whole hemisphere: a proxy of the coating's lobe (α = 0.08 on the `balls`
+    ///   plastic) would put nearly every sample in the few patches around the mirror
+    ///   direction and starve the base. The coating's highlight is left to BSDF
+    ///   sampling, which `mis-product` combines with the product sample; for rough
+    ///   coatings the proxy tends to the cosine anyway.
+    #[inline]
+    pub fn product_factor(&self, normal: Vec3, wo_world: Vec3) -> Factor {
+        match *self {
+            Bsdf::Diffuse { .. } | Bsdf::Plastic { .. } => Factor::cosine(normal),
+            Bsdf::Conductor { alpha, .. } => {
+                Factor::glossy(normal, wo_world, alpha.clamp(MIN_ALPHA, 1.0))
+            }
+        }
     }
 }
 

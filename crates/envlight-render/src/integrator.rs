@@ -8,14 +8,17 @@ use crate::scene::Scene;
 use crate::strategy::{CompensatedLight, Strategy};
 use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use envlight::rng::SplitMix64;
-use envlight::{EnvironmentLight, Vec3};
+use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
+use std::sync::Arc;
 
 /// Bounces after which Russian roulette starts.
 pub const ROULETTE_DEPTH: u32 = 3;
 
 /// Estimates the radiance arriving along camera rays.
 ///
-/// `Send + Sync`; [`Integrator::li`] allocates nothing.
+/// `Send + Sync`. [`Integrator::li_with`] allocates nothing; it keeps what changes
+/// from vertex to vertex (the product sampler's [`ShadingPoint`]) in a [`Scratch`],
+/// one per thread.
 #[derive(Debug, Clone)]
 pub struct Integrator<'a> {
     scene: &'a Scene,
@@ -23,6 +26,16 @@ pub struct Integrator<'a> {
     strategy: Strategy,
     max_depth: u32,
     compensated: Option<CompensatedLight>,
+    product: Option<ProductSampler>,
+}
+
+/// The working state of one thread's paths for [`Integrator::li_with`]: for the
+/// product strategies, the one [`ShadingPoint`] that every vertex of every path
+/// moves to its own factor ([`ShadingPoint::set_factor`] reuses its buffer). Made
+/// by [`Integrator::scratch`]; holds nothing for the other strategies.
+#[derive(Debug, Clone)]
+pub struct Scratch<'s> {
+    point: Option<ShadingPoint<'s>>,
 }
 
 /// The power heuristic (β = 2) weight of a technique with density `a` against one
@@ -41,7 +54,8 @@ impl<'a> Integrator<'a> {
     /// An integrator for `scene` under `light`. `max_depth` is the largest number of
     /// surface interactions on a path (1 = direct lighting only; 0 renders only what
     /// camera rays see directly: the environment, black objects). Builds the
-    /// compensated distribution when `strategy` needs it.
+    /// compensated distribution, or the product sampler (over a copy of `light`,
+    /// `O(w h)`), when `strategy` needs it: once per render.
     pub fn new(
         scene: &'a Scene,
         light: &'a EnvironmentLight,
@@ -50,12 +64,16 @@ impl<'a> Integrator<'a> {
     ) -> Self {
         let compensated =
             (strategy == Strategy::MisCompensated).then(|| CompensatedLight::new(light));
+        let product = strategy
+            .uses_product()
+            .then(|| ProductSampler::new(Arc::new(light.clone()), ProductOptions::default()));
         Self {
             scene,
             light,
             strategy,
             max_depth,
             compensated,
+            product,
         }
     }
 
@@ -64,21 +82,41 @@ impl<'a> Integrator<'a> {
         self.strategy
     }
 
+    /// Working state for [`Self::li_with`], one per thread: for the product
+    /// strategies one [`ShadingPoint`] (an allocation of `Pw Ph + 1` doubles, made
+    /// here and never again).
+    pub fn scratch(&self) -> Scratch<'_> {
+        Scratch {
+            // An invalid (zero) factor: no bounds are computed until a vertex sets one.
+            point: self
+                .product
+                .as_ref()
+                .map(|p| p.at(&Factor::cosine(Vec3::default()))),
+        }
+    }
+
     /// Density of the light-sampling technique at world direction `d` (0 for
-    /// strategies without one).
+    /// strategies without one); `point` is the current vertex's shading point for
+    /// the product strategies.
     #[inline]
-    fn light_technique_pdf(&self, d: Vec3) -> f32 {
+    fn light_technique_pdf(&self, d: Vec3, point: Option<&ShadingPoint>) -> f32 {
         match (&self.compensated, self.strategy) {
             (Some(c), _) => c.pdf(d),
             (None, Strategy::Mis | Strategy::Light) => self.light.pdf(d),
             (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
+            (None, Strategy::Product | Strategy::MisProduct) => point.map_or(0.0, |p| p.pdf(d)),
             (None, _) => 0.0,
         }
     }
 
-    /// One light-sampled direction: `(direction, pdf, radiance)`.
+    /// One light-sampled direction: `(direction, pdf, radiance)`; `point` as in
+    /// [`Self::light_technique_pdf`].
     #[inline]
-    fn sample_light_technique(&self, xi: [f32; 2]) -> Option<(Vec3, f32, Rgb)> {
+    fn sample_light_technique(
+        &self,
+        xi: [f32; 2],
+        point: Option<&ShadingPoint>,
+    ) -> Option<(Vec3, f32, Rgb)> {
         match self.strategy {
             Strategy::Bsdf => None,
             Strategy::Uniform => {
@@ -94,15 +132,32 @@ impl<'a> Integrator<'a> {
                 .as_ref()
                 .and_then(|c| c.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
+            Strategy::Product | Strategy::MisProduct => point
+                .and_then(|p| p.sample(xi))
+                .map(|s| (s.direction, s.pdf, s.radiance)),
         }
     }
 
     /// One sample of the radiance arriving at the camera along `ray` (linear RGB).
     ///
     /// Consumes random numbers from `rng` only; the result is a pure function of
-    /// the ray and the generator's state.
+    /// the ray and the generator's state. Makes a fresh [`Scratch`] (an allocation
+    /// for the product strategies): loops should call [`Self::li_with`].
     pub fn li(&self, ray: &Ray, rng: &mut SplitMix64) -> Rgb {
-        let mis = matches!(self.strategy, Strategy::Mis | Strategy::MisCompensated);
+        self.li_with(ray, rng, &mut self.scratch())
+    }
+
+    /// [`Self::li`] with this thread's working state, `scratch`, which must come
+    /// from [`Self::scratch`] of this integrator (another's would sample another
+    /// light). Allocates nothing. The result does not depend on what `scratch` was
+    /// used for before: every vertex sets its own factor.
+    pub fn li_with(&self, ray: &Ray, rng: &mut SplitMix64, scratch: &mut Scratch) -> Rgb {
+        debug_assert_eq!(
+            scratch.point.is_some(),
+            self.product.is_some(),
+            "a scratch from another integrator"
+        );
+        let mis = self.strategy.is_mis();
         let Some(mut hit) = self.scene.intersect(ray, f32::INFINITY) else {
             return self.light.radiance(ray.direction);
         };
@@ -123,11 +178,18 @@ impl<'a> Integrator<'a> {
             if wo.z <= 0.0 {
                 break;
             }
+            // The product sampler's target at this vertex; the escaped BSDF ray below
+            // is weighted with the pdf of this same shading point.
+            if let Some(point) = scratch.point.as_mut() {
+                point.set_factor(&bsdf.product_factor(normal, -ray.direction));
+            }
+            let point = scratch.point.as_ref();
 
             // Next-event estimation: a direction from the light technique, weighted
-            // against the BSDF technique when combining.
+            // against the BSDF technique when combining. The estimate is the true
+            // `f cos θi L / p`, whatever target the light technique sampled.
             let xi_light = [rng.next_f32(), rng.next_f32()];
-            if let Some((wi_world, light_pdf, le)) = self.sample_light_technique(xi_light) {
+            if let Some((wi_world, light_pdf, le)) = self.sample_light_technique(xi_light, point) {
                 let wi = frame.to_local(wi_world);
                 if wi.z > 0.0 && !is_black(le) {
                     let f = bsdf.eval(wo, wi);
@@ -174,7 +236,7 @@ impl<'a> Integrator<'a> {
                 None => {
                     if self.strategy.counts_escaped_bsdf_rays() {
                         let weight = if mis {
-                            power_heuristic(bs.pdf, self.light_technique_pdf(wi_world))
+                            power_heuristic(bs.pdf, self.light_technique_pdf(wi_world, point))
                         } else {
                             1.0
                         };

@@ -2,11 +2,13 @@
 //! importance-sampled environment map — the preview renderer of `envlight render`
 //! and the end-to-end test of the light.
 //!
-//! - [`Scene::builtin`] gives the built-in scenes (`balls`, `furnace`).
+//! - [`Scene::builtin`] gives the built-in scenes (`balls`, `diffuse`, `furnace`).
 //! - [`render()`] traces an image with one [`Strategy`] for the light: uniform
 //!   directions, BSDF sampling, the light's importance sampling, their MIS
-//!   combination, or MIS with the compensated light distribution
-//!   ([`CompensatedLight`]).
+//!   combination, MIS with the compensated light distribution
+//!   ([`CompensatedLight`]), or product sampling of the light times the BSDF's
+//!   factor at each shading point ([`envlight::ProductSampler`]), alone or with
+//!   MIS.
 //! - [`write_image`] saves `.exr`/`.pfm` (linear) or `.png` (tone mapped).
 //! - [`compare()`] renders every strategy at equal samples (and time) and measures
 //!   them against a reference; [`Comparison::write_sheet_png`] draws the labelled
@@ -47,7 +49,7 @@ pub use bsdf::{Bsdf, BsdfSample};
 pub use compare::{compare, relative_mse, rmse, Budget, CompareEntry, CompareSettings, Comparison};
 pub use geometry::{Camera, Frame, Ray, Shape};
 pub use image::{auto_exposure, encode_image, read_image, write_image, Image, ImageFormat};
-pub use integrator::Integrator;
+pub use integrator::{Integrator, Scratch};
 pub use render::{
     render, render_for_time, render_with_error, NoProgress, Progress, RenderSettings, Rendered,
 };

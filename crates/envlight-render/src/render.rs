@@ -191,27 +191,31 @@ fn trace_pass(
     if width == 0 {
         return;
     }
-    sums.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, acc) in row.iter_mut().enumerate() {
-            let pixel = (y * width + x) as u64;
-            for s in first..end {
-                let mut rng = sample_rng(settings.seed, pixel, s as u64);
-                // Box filter: a uniform point in the pixel.
-                let (jx, jy) = (rng.next_f32(), rng.next_f32());
-                let ray: Ray =
-                    scene
-                        .camera
-                        .ray(x as f32 + jx, y as f32 + jy, width, settings.height);
-                let l = integrator.li(&ray, &mut rng);
-                for (c, &v) in l.iter().enumerate() {
-                    let v = v as f64;
-                    acc.sum[c] += v;
-                    acc.sum_sq[c] += v * v;
+    // One scratch per rayon work item (about one per thread), not per sample.
+    sums.par_chunks_mut(width).enumerate().for_each_init(
+        || integrator.scratch(),
+        |scratch, (y, row)| {
+            for (x, acc) in row.iter_mut().enumerate() {
+                let pixel = (y * width + x) as u64;
+                for s in first..end {
+                    let mut rng = sample_rng(settings.seed, pixel, s as u64);
+                    // Box filter: a uniform point in the pixel.
+                    let (jx, jy) = (rng.next_f32(), rng.next_f32());
+                    let ray: Ray =
+                        scene
+                            .camera
+                            .ray(x as f32 + jx, y as f32 + jy, width, settings.height);
+                    let l = integrator.li_with(&ray, &mut rng, scratch);
+                    for (c, &v) in l.iter().enumerate() {
+                        let v = v as f64;
+                        acc.sum[c] += v;
+                        acc.sum_sq[c] += v * v;
+                    }
                 }
             }
-        }
-        row_done();
-    });
+            row_done();
+        },
+    );
 }
 
 fn finish(settings: &RenderSettings, sums: &[PixelSums], spp: u32, elapsed: Duration) -> Rendered {

@@ -75,7 +75,13 @@ pub struct Scene {
 }
 
 /// Names accepted by [`Scene::builtin`].
-pub const SCENE_NAMES: [&str; 2] = ["balls", "furnace"];
+pub const SCENE_NAMES: [&str; 3] = ["balls", "diffuse", "furnace"];
+
+/// Albedo of the spheres in the `diffuse` scene.
+pub const DIFFUSE_SPHERE_ALBEDO: f32 = 0.8;
+
+/// Albedo of the ground in the `diffuse` scene.
+pub const DIFFUSE_GROUND_ALBEDO: f32 = 0.5;
 
 /// Albedo of the sphere in the `furnace` scene.
 pub const FURNACE_ALBEDO: f32 = 0.5;
@@ -87,12 +93,17 @@ impl Scene {
     ///   seen from slightly above: diffuse (ρ = 0.7), rough copper (GGX α = 0.25),
     ///   near-mirror silver (α = 0.02), and a blue plastic (ρ = (0.1, 0.25, 0.6)
     ///   under a GGX coating with η = 1.5, α = 0.08).
+    /// - `diffuse`: only Lambertian surfaces, the target of product sampling with
+    ///   the clamped cosine: three white spheres (ρ = [`DIFFUSE_SPHERE_ALBEDO`]) of
+    ///   radii 1, 0.6 and 1.3 on a large grey disc (ρ = [`DIFFUSE_GROUND_ALBEDO`]),
+    ///   the camera of `balls`.
     /// - `furnace`: one unit diffuse sphere of albedo [`FURNACE_ALBEDO`], nothing
     ///   else. Under a constant map of radiance 1 every sphere pixel is 0.5 and every
     ///   background pixel 1.
     pub fn builtin(name: &str) -> Option<Scene> {
         match name {
             "balls" => Some(Self::balls()),
+            "diffuse" => Some(Self::diffuse()),
             "furnace" => Some(Self::furnace()),
             _ => None,
         }
@@ -162,6 +173,40 @@ impl Scene {
                 look_at: Vec3::new(0.0, 0.0, 0.8),
                 vfov_degrees: 32.0,
             },
+            objects,
+        }
+    }
+
+    fn diffuse() -> Scene {
+        let white = Material::Uniform(Bsdf::Diffuse {
+            albedo: [DIFFUSE_SPHERE_ALBEDO; 3],
+        });
+        let sphere = |name: &'static str, x: f32, y: f32, radius: f32| Object {
+            name,
+            shape: Shape::Sphere {
+                center: Vec3::new(x, y, radius),
+                radius,
+            },
+            material: white,
+        };
+        let objects = vec![
+            sphere("left", -2.6, 0.4, 1.0),
+            sphere("small", -0.2, -1.4, 0.6),
+            sphere("right", 2.3, 0.9, 1.3),
+            Object {
+                name: "ground",
+                shape: Shape::Disc {
+                    center: Vec3::new(0.0, 0.0, 0.0),
+                    radius: 30.0,
+                },
+                material: Material::Uniform(Bsdf::Diffuse {
+                    albedo: [DIFFUSE_GROUND_ALBEDO; 3],
+                }),
+            },
+        ];
+        Scene {
+            name: "diffuse".into(),
+            camera: Self::balls().camera,
             objects,
         }
     }

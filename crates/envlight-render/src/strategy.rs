@@ -16,6 +16,20 @@ use std::str::FromStr;
 /// | `light` | the light's importance sampling, weight 1 | weight 0 |
 /// | `mis` | importance sampling, power heuristic | power heuristic |
 /// | `mis-compensated` | compensated distribution, power heuristic | power heuristic |
+/// | `product` | product sampling of `L ×` the BSDF's factor, weight 1 | weight 0 |
+/// | `mis-product` | product sampling, power heuristic | power heuristic |
+///
+/// The product strategies draw the shadow ray's direction at each vertex from
+/// [`envlight::ProductSampler`] with the target `L(ω) f(ω)`, where the factor `f` is
+/// [`Bsdf::product_factor`](crate::Bsdf::product_factor): the clamped cosine for
+/// diffuse surfaces (and plastic), the cosine times a GGX lobe proxy of the
+/// surface's roughness for conductors (DESIGN.md §6a). The factor is only the
+/// sampling target: each light sample is weighted by the true BSDF value times the
+/// cosine over the product pdf, and in `mis-product` both power-heuristic weights
+/// (of the shadow ray and of the BSDF-sampled ray that escapes) use the product pdf
+/// of the same shading point. Both stay unbiased because the product pdf is
+/// positive wherever `L(ω) max(0, n·ω) > 0` (every factor is positive over the whole
+/// upper hemisphere).
 ///
 /// Camera rays that escape always see `light.radiance(ω)`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -31,16 +45,24 @@ pub enum Strategy {
     Mis,
     /// As `Mis`, with the light sampled from [`CompensatedLight`].
     MisCompensated,
+    /// Product sampling of the light times the BSDF's factor at the shading point
+    /// only (like `Light`, BSDF-sampled rays that escape count 0).
+    Product,
+    /// Product sampling and BSDF sampling combined by the power heuristic (β = 2),
+    /// both weights with the product pdf at the shading point.
+    MisProduct,
 }
 
 impl Strategy {
     /// All strategies, in the order reports list them.
-    pub const ALL: [Strategy; 5] = [
+    pub const ALL: [Strategy; 7] = [
         Strategy::Uniform,
         Strategy::Bsdf,
         Strategy::Light,
         Strategy::Mis,
         Strategy::MisCompensated,
+        Strategy::Product,
+        Strategy::MisProduct,
     ];
 
     /// The command-line name.
@@ -51,16 +73,30 @@ impl Strategy {
             Strategy::Light => "light",
             Strategy::Mis => "mis",
             Strategy::MisCompensated => "mis-compensated",
+            Strategy::Product => "product",
+            Strategy::MisProduct => "mis-product",
         }
     }
 
     /// Whether a BSDF-sampled ray that escapes to the light contributes.
     #[inline]
     pub fn counts_escaped_bsdf_rays(self) -> bool {
+        matches!(self, Strategy::Bsdf) || self.is_mis()
+    }
+
+    /// Whether the light and BSDF techniques are combined by the power heuristic.
+    #[inline]
+    pub fn is_mis(self) -> bool {
         matches!(
             self,
-            Strategy::Bsdf | Strategy::Mis | Strategy::MisCompensated
+            Strategy::Mis | Strategy::MisCompensated | Strategy::MisProduct
         )
+    }
+
+    /// Whether the light technique is the product sampler at the shading point.
+    #[inline]
+    pub fn uses_product(self) -> bool {
+        matches!(self, Strategy::Product | Strategy::MisProduct)
     }
 }
 
@@ -72,7 +108,10 @@ impl fmt::Display for Strategy {
 
 /// The error of parsing an unknown strategy name.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown strategy '{0}' (expected one of: uniform, bsdf, light, mis, mis-compensated)")]
+#[error(
+    "unknown strategy '{0}' (expected one of: uniform, bsdf, light, mis, mis-compensated, \
+     product, mis-product)"
+)]
 pub struct UnknownStrategy(pub String);
 
 impl FromStr for Strategy {
@@ -163,6 +202,15 @@ mod tests {
             assert_eq!(s.name().parse::<Strategy>().unwrap(), s);
         }
         assert!("MIS".parse::<Strategy>().is_err());
+        // The error lists every name.
+        let message = "x".parse::<Strategy>().unwrap_err().to_string();
+        for s in Strategy::ALL {
+            assert!(
+                message.contains(&format!(" {},", s.name()))
+                    || message.contains(&format!(" {})", s.name())),
+                "{message}"
+            );
+        }
     }
 
     #[test]

@@ -63,6 +63,10 @@ fn white_furnace_every_strategy() {
         "{n_sphere} {n_background}"
     );
 
+    // Every strategy, the product ones included.
+    assert!([Strategy::Product, Strategy::MisProduct]
+        .iter()
+        .all(|s| Strategy::ALL.contains(s)));
     for strategy in Strategy::ALL {
         let settings = RenderSettings {
             width: w,

@@ -28,13 +28,17 @@ use crate::progress::Progress;
 #[derive(Debug, clap::Args)]
 #[command(after_help = concat!(
     "Scenes: balls (diffuse, rough copper, near-mirror silver and blue plastic spheres on a \
-checkered ground), furnace (one diffuse sphere of albedo 0.5: under a constant map of \
+checkered ground), diffuse (three white diffuse spheres of albedo 0.8 on a grey ground of \
+albedo 0.5), furnace (one diffuse sphere of albedo 0.5: under a constant map of \
 radiance 1 it renders 0.5 on the sphere and 1 around it).\n\n\
 Strategies estimate the light at each path vertex: uniform (uniform sphere directions), \
 bsdf (BSDF sampling only), light (environment importance sampling only), mis (both, \
 power heuristic), mis-compensated (mis with the map's mean luminance subtracted from the \
 light's sampling density, after Karlik et al. 2019; unbiased because BSDF sampling \
-covers what it leaves out). Paths use next-event estimation with shadow rays and \
+covers what it leaves out), product (the light sampled in proportion to radiance times \
+the surface's cosine, or cosine times a GGX lobe for metals, at each shading point; each \
+sample weighted by the true BSDF), mis-product (product and BSDF sampling, power \
+heuristic). Paths use next-event estimation with shadow rays and \
 Russian roulette after 3 bounces. The image is the same for a given --seed whatever the \
 number of threads.\n\n\
 --compare renders every strategy at --spp (and for --equal-time SECONDS each), measures \
