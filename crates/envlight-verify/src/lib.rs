@@ -34,6 +34,7 @@
 
 mod checks;
 mod integrand;
+pub mod maps;
 mod param;
 mod product;
 mod quadrature;

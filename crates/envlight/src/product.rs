@@ -772,20 +772,7 @@ impl ProductSampler {
         xi: &[[f32; 2]],
         out: &mut [Option<LightSample>],
     ) {
-        assert!(
-            factors.len() == xi.len() && xi.len() == out.len(),
-            "batch input and output lengths differ"
-        );
-        out.par_iter_mut()
-            .zip(factors.par_iter().zip(xi.par_iter()))
-            .with_min_len(64)
-            .for_each_init(
-                || self.empty_point(),
-                |point, (o, (factor, &xi))| {
-                    point.set_factor(factor);
-                    *o = point.sample(xi);
-                },
-            );
+        self.per_point(factors, xi, out, |point, &xi| point.sample(xi));
     }
 
     /// `out[i] = self.pdf(&factors[i], directions[i])`, in parallel, as
@@ -794,18 +781,30 @@ impl ProductSampler {
     /// # Panics
     /// When the slices differ in length.
     pub fn pdf_batch(&self, factors: &[Factor], directions: &[Vec3], out: &mut [f32]) {
+        self.per_point(factors, directions, out, |point, &d| point.pdf(d));
+    }
+
+    /// `out[i] = query(shading point of factors[i], &input[i])` in parallel, each
+    /// thread reusing one [`ShadingPoint`] (runs of equal factors set it up once).
+    fn per_point<I: Sync, O: Send>(
+        &self,
+        factors: &[Factor],
+        input: &[I],
+        out: &mut [O],
+        query: impl Fn(&ShadingPoint, &I) -> O + Sync,
+    ) {
         assert!(
-            factors.len() == directions.len() && directions.len() == out.len(),
+            factors.len() == input.len() && input.len() == out.len(),
             "batch input and output lengths differ"
         );
         out.par_iter_mut()
-            .zip(factors.par_iter().zip(directions.par_iter()))
+            .zip(factors.par_iter().zip(input.par_iter()))
             .with_min_len(64)
             .for_each_init(
                 || self.empty_point(),
-                |point, (o, (factor, &direction))| {
+                |point, (o, (factor, x))| {
                     point.set_factor(factor);
-                    *o = point.pdf(direction);
+                    *o = query(point, x);
                 },
             );
     }

@@ -11,71 +11,15 @@
 //! the harness rejects each of them: they prove the checks can fail.
 
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Vec3};
+use envlight_verify::maps::{black, constant, gradient, hot, huge_range, random};
 use envlight_verify::{
     self as verify, Config, Grid, Integrand, SphereSample, SphereSampler, ALPHA,
 };
 use std::path::{Path, PathBuf};
 
 // ---------------------------------------------------------------------------
-// Synthetic maps.
+// Lights over the synthetic maps of `envlight_verify::maps`.
 // ---------------------------------------------------------------------------
-
-fn constant(w: usize, h: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |_, _| [0.8, 1.0, 1.2]).unwrap()
-}
-
-/// Smooth in u (periodic) and v, never zero, with the three channels differing.
-fn gradient(w: usize, h: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |x, y| {
-        let u = (x as f32 + 0.5) / w as f32;
-        let v = (y as f32 + 0.5) / h as f32;
-        let phase = (2.0 * std::f32::consts::PI * u).cos();
-        [1.0 + 0.9 * phase, 0.2 + 3.0 * v * v, 0.5 + u]
-    })
-    .unwrap()
-}
-
-/// Black except texel `(x, y)`.
-fn hot(w: usize, h: usize, hx: usize, hy: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |x, y| {
-        if (x, y) == (hx, hy) {
-            [40.0, 30.0, 20.0]
-        } else {
-            [0.0; 3]
-        }
-    })
-    .unwrap()
-}
-
-/// Log-uniform values over 1e-3..1e3 per channel, a third of the texels exactly
-/// black, from a fixed seed.
-fn random(w: usize, h: usize, seed: u64) -> EnvImage {
-    let mut rng = envlight::rng::SplitMix64::new(seed);
-    EnvImage::from_fn(w, h, |_, _| {
-        if rng.next_f32() < 1.0 / 3.0 {
-            [0.0; 3]
-        } else {
-            [(); 3].map(|_| 10f32.powf(6.0 * rng.next_f32() - 3.0))
-        }
-    })
-    .unwrap()
-}
-
-/// One texel at 1e30, all others 1e-30.
-fn huge_range(w: usize, h: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |x, y| {
-        if (x, y) == (w / 3, h / 2) {
-            [1e30; 3]
-        } else {
-            [1e-30; 3]
-        }
-    })
-    .unwrap()
-}
-
-fn black(w: usize, h: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |_, _| [0.0; 3]).unwrap()
-}
 
 fn light(image: EnvImage, lookup: Lookup) -> EnvironmentLight {
     EnvironmentLight::new(

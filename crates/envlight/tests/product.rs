@@ -17,6 +17,7 @@ use envlight::{
     EnvImage, EnvironmentLight, Factor, LightOptions, Lookup, PatchBound, ProductOptions,
     ProductSampler, Rotation, Vec3,
 };
+use envlight_verify::maps::{constant, hot, random};
 use envlight_verify::{
     self as verify, AtShadingPoint, Config, Grid, Integrand, Reference, SphereSample, SphereSampler,
 };
@@ -26,35 +27,6 @@ use std::sync::Arc;
 // ---------------------------------------------------------------------------
 // Maps, lights and shading points.
 // ---------------------------------------------------------------------------
-
-/// Log-uniform values over 1e-3..1e3 per channel, a third of the texels black.
-fn random(w: usize, h: usize, seed: u64) -> EnvImage {
-    let mut rng = envlight::rng::SplitMix64::new(seed);
-    EnvImage::from_fn(w, h, |_, _| {
-        if rng.next_f32() < 1.0 / 3.0 {
-            [0.0; 3]
-        } else {
-            [(); 3].map(|_| 10f32.powf(6.0 * rng.next_f32() - 3.0))
-        }
-    })
-    .unwrap()
-}
-
-fn constant(w: usize, h: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |_, _| [0.8, 1.0, 1.2]).unwrap()
-}
-
-/// Black except texel `(x, y)`.
-fn hot(w: usize, h: usize, hx: usize, hy: usize) -> EnvImage {
-    EnvImage::from_fn(w, h, |x, y| {
-        if (x, y) == (hx, hy) {
-            [40.0, 30.0, 20.0]
-        } else {
-            [0.0; 3]
-        }
-    })
-    .unwrap()
-}
 
 fn sky() -> EnvImage {
     envlight::builtin::sky(256, 128)

@@ -1,0 +1,69 @@
+//! Synthetic maps that exercise the checks: smooth, constant, one hot texel,
+//! random with black holes, extreme dynamic range, black. Each is a pure function
+//! of its arguments, so every test and front end that uses them sees the same map.
+
+use envlight::EnvImage;
+
+/// `[0.8, 1.0, 1.2]` everywhere.
+pub fn constant(w: usize, h: usize) -> EnvImage {
+    from_fn(w, h, |_, _| [0.8, 1.0, 1.2])
+}
+
+/// Smooth in u (periodic) and v, never zero, with the three channels differing.
+pub fn gradient(w: usize, h: usize) -> EnvImage {
+    from_fn(w, h, |x, y| {
+        let u = (x as f32 + 0.5) / w as f32;
+        let v = (y as f32 + 0.5) / h as f32;
+        let phase = (2.0 * std::f32::consts::PI * u).cos();
+        [1.0 + 0.9 * phase, 0.2 + 3.0 * v * v, 0.5 + u]
+    })
+}
+
+/// Black except texel `(hx, hy)`, which is `[40, 30, 20]`.
+pub fn hot(w: usize, h: usize, hx: usize, hy: usize) -> EnvImage {
+    from_fn(w, h, |x, y| {
+        if (x, y) == (hx, hy) {
+            [40.0, 30.0, 20.0]
+        } else {
+            [0.0; 3]
+        }
+    })
+}
+
+/// Log-uniform values over 1e-3..1e3 per channel, a third of the texels exactly
+/// black, from a fixed seed.
+pub fn random(w: usize, h: usize, seed: u64) -> EnvImage {
+    let mut rng = envlight::rng::SplitMix64::new(seed);
+    from_fn(w, h, |_, _| {
+        if rng.next_f32() < 1.0 / 3.0 {
+            [0.0; 3]
+        } else {
+            [(); 3].map(|_| 10f32.powf(6.0 * rng.next_f32() - 3.0))
+        }
+    })
+}
+
+/// One texel at 1e30 (at `(w/3, h/2)`), all others 1e-30.
+pub fn huge_range(w: usize, h: usize) -> EnvImage {
+    from_fn(w, h, |x, y| {
+        if (x, y) == (w / 3, h / 2) {
+            [1e30; 3]
+        } else {
+            [1e-30; 3]
+        }
+    })
+}
+
+/// All black.
+pub fn black(w: usize, h: usize) -> EnvImage {
+    from_fn(w, h, |_, _| [0.0; 3])
+}
+
+/// # Panics
+/// For a size [`EnvImage::from_fn`] refuses (zero or above its limit).
+fn from_fn(w: usize, h: usize, f: impl FnMut(usize, usize) -> [f32; 3]) -> EnvImage {
+    match EnvImage::from_fn(w, h, f) {
+        Ok(image) => image,
+        Err(e) => panic!("synthetic map {w}x{h}: {e}"),
+    }
+}
