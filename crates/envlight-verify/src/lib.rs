@@ -52,7 +52,7 @@ pub use checks::normalisation::{normalisation, Normalisation};
 pub use checks::support::{support, Support};
 pub use checks::unbiasedness::{
     efficiency, lobe_normals, unbiasedness, Efficiency, Estimate, Reference, Unbiasedness,
-    MASS_RESOLUTION,
+    MASS_RESOLUTION, MAX_LOBES,
 };
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};

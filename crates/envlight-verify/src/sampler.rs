@@ -22,7 +22,7 @@ pub struct SphereSample {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Grid {
     /// `width × height` cells of the equirectangular map (DESIGN.md §2): `φ = 2π u`,
-    /// `θ = π v` ([`direction_at`]); u wraps, and the poles are singular.
+    /// `θ = π v` ([`direction_at`](crate::direction_at)); u wraps, and the poles are singular.
     Equirect {
         /// Cells along u (φ).
         width: usize,
@@ -32,7 +32,7 @@ pub enum Grid {
         to_world: Rotation,
     },
     /// `size × size` cells of the equal-area octahedral square
-    /// ([`square_to_sphere`]): `dω = 4π du dv` everywhere, no singular point; the
+    /// ([`square_to_sphere`](crate::square_to_sphere)): `dω = 4π du dv` everywhere, no singular point; the
     /// square's boundary is folded onto itself.
     EqualArea {
         /// Cells along u and along v.

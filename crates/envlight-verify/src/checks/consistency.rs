@@ -19,7 +19,7 @@ pub struct Consistency {
     pub malformed: usize,
     /// Exempt: within [`EDGE_BAND`] of a cell edge.
     pub near_edge: usize,
-    /// Exempt: within [`POLE_BAND_SIN`] of a pole.
+    /// Exempt: within [`POLE_BAND_SIN`](crate::POLE_BAND_SIN) of a pole.
     pub near_pole: usize,
     /// Samples checked.
     pub checked: usize,

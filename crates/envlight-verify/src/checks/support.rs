@@ -14,7 +14,7 @@ use std::fmt;
 pub struct Support {
     /// Probes evaluated.
     pub probes: usize,
-    /// Probes skipped because they lie within [`POLE_BAND_SIN`] of a pole.
+    /// Probes skipped because they lie within [`POLE_BAND_SIN`](crate::POLE_BAND_SIN) of a pole.
     pub near_pole: usize,
     /// Probes where the integrand is positive (`L > 0` and a positive factor).
     pub lit: usize,
@@ -70,7 +70,7 @@ impl fmt::Display for Support {
 /// weight ≥ 0.48² from each of the four texels around that corner, so the five
 /// probes see every neighbour that can light the cell. Probes are placed in the
 /// grid's own `(u, v)` and mapped by the harness's mapping. On the lat-long map,
-/// probes within [`POLE_BAND_SIN`] of a pole are skipped: "up to the measure-zero
+/// probes within [`POLE_BAND_SIN`](crate::POLE_BAND_SIN) of a pole are skipped: "up to the measure-zero
 /// poles" (DESIGN.md §5), widened to where an f32 direction no longer pins θ down;
 /// the equal-area square has no such points.
 pub fn support(s: &dyn SphereSampler, integrand: &Integrand) -> Support {
