@@ -384,7 +384,10 @@ pub fn uniform_sphere(xi: [f32; 2]) -> Vec3 {
 }
 
 /// A 3-vector of `f32` (a direction or a point). The frame is right-handed, z up.
+/// Laid out as three consecutive `f32` (`x`, `y`, `z`), so a slice of them can be
+/// viewed as an `N × 3` array (the Python bindings do).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
 pub struct Vec3 {
     /// x component.
     pub x: f32,

@@ -1,0 +1,609 @@
+//! The `envlight._native` Python module: the library's environment light, its
+//! product sampler and its verification harness over numpy arrays.
+//!
+//! Arrays come in as `float32` and are read in place when C-contiguous (copied
+//! otherwise); results are new `float32` arrays. Every batch call releases the
+//! interpreter lock and goes through the library's batch kernels. Errors become
+//! the Python exception a user expects (`FileNotFoundError`, `OSError`,
+//! `ValueError`, `TypeError`); nothing panics across the boundary.
+
+use std::sync::{Arc, OnceLock};
+
+use envlight::light::{Density, Mapping, Sampler};
+use envlight::load::{load, LoadOptions};
+use envlight::{
+    EnvImage, Factor, LightOptions, Lookup, ProductOptions, ProductSampler, Rotation, Vec3,
+};
+use envlight_verify::{AtShadingPoint, Config, Integrand, Lobes, Reference, SphereSampler};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rayon::prelude::*;
+
+/// The world frame directions are given and returned in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Frame {
+    /// The library's: z up.
+    ZUp,
+    /// Mitsuba 3's envmap frame (DESIGN.md §6b): `(y, z, −x)` of the z-up direction.
+    YUp,
+}
+
+impl Frame {
+    fn parse(name: &str) -> PyResult<Self> {
+        match name {
+            "z-up" => Ok(Frame::ZUp),
+            "y-up" => Ok(Frame::YUp),
+            _ => Err(PyValueError::new_err(format!(
+                "frame must be \"z-up\" or \"y-up\", not {name:?}"
+            ))),
+        }
+    }
+
+    /// A z-up direction in this frame.
+    fn z_up_to_frame(self, d: Vec3) -> Vec3 {
+        match self {
+            Frame::ZUp => d,
+            Frame::YUp => Vec3::new(d.y, d.z, -d.x),
+        }
+    }
+
+    /// A direction in this frame, in z-up.
+    fn frame_to_z_up(self, d: Vec3) -> Vec3 {
+        match self {
+            Frame::ZUp => d,
+            Frame::YUp => Vec3::new(-d.z, d.x, d.y),
+        }
+    }
+}
+
+/// The light's options from the keyword arguments.
+#[allow(clippy::too_many_arguments)]
+fn light_options(
+    sampler: &str,
+    density: &str,
+    mapping: &str,
+    lookup: &str,
+    rotate: f32,
+    scale: f32,
+) -> PyResult<LightOptions> {
+    let choice = |what: &str, value: &str, names: &[&str]| {
+        PyValueError::new_err(format!(
+            "{what} must be one of {}, not {value:?}",
+            names.join(", ")
+        ))
+    };
+    let sampler = match sampler {
+        "inversion" => Sampler::Inversion,
+        "alias" => Sampler::Alias,
+        "hierarchical" => Sampler::Hierarchical,
+        _ => {
+            return Err(choice(
+                "sampler",
+                sampler,
+                &["inversion", "alias", "hierarchical"],
+            ))
+        }
+    };
+    let density = match density {
+        "piecewise-constant" => Density::PiecewiseConstant,
+        "piecewise-bilinear" => Density::PiecewiseBilinear,
+        _ => {
+            return Err(choice(
+                "density",
+                density,
+                &["piecewise-constant", "piecewise-bilinear"],
+            ))
+        }
+    };
+    let mapping = match mapping {
+        "equirectangular" => Mapping::Equirectangular,
+        "equal-area" => Mapping::EqualArea,
+        _ => {
+            return Err(choice(
+                "mapping",
+                mapping,
+                &["equirectangular", "equal-area"],
+            ))
+        }
+    };
+    let lookup = match lookup {
+        "bilinear" => Lookup::Bilinear,
+        "nearest" => Lookup::Nearest,
+        _ => return Err(choice("lookup", lookup, &["bilinear", "nearest"])),
+    };
+    if !rotate.is_finite() {
+        return Err(PyValueError::new_err(format!(
+            "rotate must be finite, not {rotate}"
+        )));
+    }
+    if !(scale.is_finite() && scale >= 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "scale must be finite and non-negative, not {scale}"
+        )));
+    }
+    Ok(LightOptions {
+        sampler,
+        density,
+        mapping,
+        lookup,
+        rotation: Rotation::about_z_degrees(rotate),
+        scale,
+        ..Default::default()
+    })
+}
+
+/// The Python exception for a library error.
+fn to_py_err(e: envlight::Error) -> PyErr {
+    match &e {
+        envlight::Error::Io { error, .. } if error.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(e.to_string())
+        }
+        envlight::Error::Io { .. }
+        | envlight::Error::UnsupportedFormat { .. }
+        | envlight::Error::Decode { .. } => PyOSError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// The rows of an `(N, K)` float32 array as a slice of `N·K` values, borrowed
+/// when C-contiguous, copied otherwise; `TypeError`/`ValueError` naming `what`
+/// and the expected shape when it is not `(N, K)`.
+fn rows<'a, const K: usize>(
+    array: &'a PyReadonlyArray2<'_, f32>,
+    what: &str,
+) -> PyResult<std::borrow::Cow<'a, [f32]>> {
+    let shape = array.shape();
+    if shape[1] != K {
+        return Err(PyValueError::new_err(format!(
+            "{what} must have shape (N, {K}), not {shape:?}"
+        )));
+    }
+    // `as_slice` also accepts Fortran order, whose memory order is not the rows'.
+    Ok(match array.as_slice() {
+        Ok(s) if array.is_c_contiguous() => std::borrow::Cow::Borrowed(s),
+        _ => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
+    })
+}
+
+/// `values` (`N·K` floats) viewed as `N` arrays of `K`.
+fn as_arrays<const K: usize>(values: &[f32]) -> &[[f32; K]] {
+    // SAFETY: `[f32; K]` has the size and alignment of `K` consecutive `f32`, and
+    // the length is a multiple of `K` (checked by `rows`).
+    unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<[f32; K]>(), values.len() / K) }
+}
+
+/// The z-up directions of an `(N, 3)` array in `frame`, borrowed where nothing
+/// needs converting.
+fn directions<'a>(values: &'a [f32], frame: Frame) -> std::borrow::Cow<'a, [Vec3]> {
+    // SAFETY: `Vec3` is `repr(C)` over three `f32`.
+    let view: &[Vec3] =
+        unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<Vec3>(), values.len() / 3) };
+    match frame {
+        Frame::ZUp => std::borrow::Cow::Borrowed(view),
+        Frame::YUp => {
+            std::borrow::Cow::Owned(view.iter().map(|&d| frame.frame_to_z_up(d)).collect())
+        }
+    }
+}
+
+/// `(directions (N, 3), pdf (N,), radiance (N, 3))`.
+type Samples<'py> = (
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray2<f32>>,
+);
+
+/// An `(N, K)` float32 array from `N·K` values.
+fn array2<'py>(py: Python<'py>, values: Vec<f32>, k: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let n = values.len() / k;
+    PyArray1::from_vec(py, values).reshape([n, k])
+}
+
+/// An importance-sampled environment light (see the `envlight` package's docs).
+#[pyclass(frozen, module = "envlight._native", name = "EnvironmentLight")]
+struct PyEnvironmentLight {
+    light: Arc<envlight::EnvironmentLight>,
+    frame: Frame,
+    product: OnceLock<ProductSampler>,
+}
+
+impl PyEnvironmentLight {
+    fn build(image: EnvImage, options: LightOptions, frame: Frame) -> PyResult<Self> {
+        let light = envlight::EnvironmentLight::new(image, options).map_err(to_py_err)?;
+        Ok(Self {
+            light: Arc::new(light),
+            frame,
+            product: OnceLock::new(),
+        })
+    }
+
+    fn product(&self) -> &ProductSampler {
+        self.product
+            .get_or_init(|| ProductSampler::new(self.light.clone(), ProductOptions::default()))
+    }
+
+    /// Draws the samples `0..n` with `draw` (given a range of sample indices and
+    /// an output slice for them, in the library's batch form), a chunk at a time
+    /// into a small buffer, and lays them out as three flat arrays (directions in
+    /// this light's frame); a missing sample is a zero direction with pdf 0 and
+    /// radiance 0. Runs without the interpreter lock.
+    fn draw<'py>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        draw: impl Fn(std::ops::Range<usize>, &mut [Option<envlight::LightSample>]) + Sync,
+    ) -> PyResult<Samples<'py>> {
+        let frame = self.frame;
+        let (dirs, pdf, rgb) = py.detach(|| {
+            let (mut dirs, mut pdf, mut rgb) =
+                (vec![0.0f32; 3 * n], vec![0.0f32; n], vec![0.0f32; 3 * n]);
+            dirs.par_chunks_mut(3 * CHUNK)
+                .zip(pdf.par_chunks_mut(CHUNK))
+                .zip(rgb.par_chunks_mut(3 * CHUNK))
+                .enumerate()
+                .for_each_init(Vec::new, |samples, (c, ((d, p), l))| {
+                    let start = c * CHUNK;
+                    samples.clear();
+                    samples.resize(p.len(), None);
+                    draw(start..start + p.len(), samples);
+                    for (k, s) in samples.iter().enumerate() {
+                        if let Some(s) = s {
+                            d[3 * k..3 * k + 3]
+                                .copy_from_slice(&frame.z_up_to_frame(s.direction).to_array());
+                            p[k] = s.pdf;
+                            l[3 * k..3 * k + 3].copy_from_slice(&s.radiance);
+                        }
+                    }
+                });
+            (dirs, pdf, rgb)
+        });
+        Ok((
+            array2(py, dirs, 3)?,
+            PyArray1::from_vec(py, pdf),
+            array2(py, rgb, 3)?,
+        ))
+    }
+}
+
+/// Samples per parallel task when laying results out.
+const CHUNK: usize = 1 << 14;
+
+/// `values` (`3 N` floats) viewed mutably as `N` RGB triples.
+fn as_triples_mut(values: &mut [f32]) -> &mut [[f32; 3]] {
+    // SAFETY: `[f32; 3]` has the layout of three consecutive `f32`, and the
+    // length is a multiple of 3 (the callers allocate `3 N`).
+    unsafe {
+        std::slice::from_raw_parts_mut(values.as_mut_ptr().cast::<[f32; 3]>(), values.len() / 3)
+    }
+}
+
+#[pymethods]
+impl PyEnvironmentLight {
+    #[new]
+    #[pyo3(signature = (path, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        sampler: &str,
+        density: &str,
+        mapping: &str,
+        lookup: &str,
+        rotate: f32,
+        scale: f32,
+        frame: &str,
+    ) -> PyResult<Self> {
+        let options = light_options(sampler, density, mapping, lookup, rotate, scale)?;
+        let frame = Frame::parse(frame)?;
+        let image = py
+            .detach(|| load(&path, &LoadOptions::default()))
+            .map_err(to_py_err)?
+            .image;
+        py.detach(|| Self::build(image, options, frame))
+    }
+
+    /// A light from an `(H, W, 3)` float32 array of linear RGB radiance, row 0 at
+    /// the top (θ = 0), column 0 at φ = 0.
+    #[staticmethod]
+    #[pyo3(signature = (rgb, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up"))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_array(
+        py: Python<'_>,
+        rgb: &Bound<'_, PyAny>,
+        sampler: &str,
+        density: &str,
+        mapping: &str,
+        lookup: &str,
+        rotate: f32,
+        scale: f32,
+        frame: &str,
+    ) -> PyResult<Self> {
+        let rgb: PyReadonlyArray3<'_, f32> = rgb.extract().map_err(|_| {
+            PyTypeError::new_err("rgb must be a numpy float32 array of shape (H, W, 3)")
+        })?;
+        let shape = rgb.shape();
+        if shape[2] != 3 || shape[0] == 0 || shape[1] == 0 {
+            return Err(PyValueError::new_err(format!(
+                "rgb must have shape (H, W, 3) with H, W > 0, not {shape:?}"
+            )));
+        }
+        let (h, w) = (shape[0], shape[1]);
+        let options = light_options(sampler, density, mapping, lookup, rotate, scale)?;
+        let frame = Frame::parse(frame)?;
+        let values: Vec<f32> = match rgb.as_slice() {
+            Ok(s) if rgb.is_c_contiguous() => s.to_vec(),
+            _ => rgb.as_array().iter().copied().collect(),
+        };
+        let texels: Vec<[f32; 3]> = as_arrays::<3>(&values).to_vec();
+        if let Some(k) = texels.iter().position(|t| t.iter().any(|c| !c.is_finite())) {
+            return Err(PyValueError::new_err(format!(
+                "rgb: texel ({}, {}) is not finite: {:?}",
+                k % w,
+                k / w,
+                texels[k]
+            )));
+        }
+        let image = EnvImage::new(w, h, texels).map_err(to_py_err)?;
+        py.detach(|| Self::build(image, options, frame))
+    }
+
+    /// `(directions (N, 3), pdf (N,), radiance (N, 3))` for `u` of shape `(N, 2)`.
+    fn sample<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Samples<'py>> {
+        let u = rows::<2>(&u, "u")?;
+        let xi = as_arrays::<2>(&u);
+        self.draw(py, xi.len(), |range, out| {
+            self.light.sample_batch(&xi[range], out)
+        })
+    }
+
+    /// The solid-angle pdf (per steradian) of each direction of an `(N, 3)` array.
+    fn pdf<'py>(
+        &self,
+        py: Python<'py>,
+        directions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let values = rows::<3>(&directions, "directions")?;
+        let dirs = self::directions(&values, self.frame);
+        let mut out = vec![0.0f32; dirs.len()];
+        py.detach(|| self.light.pdf_batch(&dirs, &mut out));
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// The radiance arriving from each direction of an `(N, 3)` array, `(N, 3)`.
+    fn radiance<'py>(
+        &self,
+        py: Python<'py>,
+        directions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let values = rows::<3>(&directions, "directions")?;
+        let dirs = self::directions(&values, self.frame);
+        let mut out = vec![0.0f32; 3 * dirs.len()];
+        py.detach(|| self.light.radiance_batch(&dirs, as_triples_mut(&mut out)));
+        array2(py, out, 3)
+    }
+
+    /// The `u` that `sample` maps to each direction, `(N, 2)`; `ValueError` for
+    /// the alias sampler, which has no inverse.
+    fn invert<'py>(
+        &self,
+        py: Python<'py>,
+        directions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        if self.light.options().sampler == Sampler::Alias {
+            return Err(PyValueError::new_err("the alias sampler has no inverse"));
+        }
+        let values = rows::<3>(&directions, "directions")?;
+        let dirs = self::directions(&values, self.frame);
+        let out: Vec<f32> = py.detach(|| {
+            dirs.iter()
+                .flat_map(|&d| self.light.invert(d).unwrap_or([0.0; 2]))
+                .collect()
+        });
+        array2(py, out, 2)
+    }
+
+    /// Product sampling at shading points: `(directions, pdf, radiance)` for
+    /// `normals` `(N, 3)` and `u` `(N, 2)`, drawn in proportion to radiance ×
+    /// max(0, n·ω). A zero or non-finite normal gives pdf 0.
+    fn sample_product<'py>(
+        &self,
+        py: Python<'py>,
+        normals: PyReadonlyArray2<'py, f32>,
+        u: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Samples<'py>> {
+        let normals = rows::<3>(&normals, "normals")?;
+        let u = rows::<2>(&u, "u")?;
+        let normals = self::directions(&normals, self.frame);
+        let xi = as_arrays::<2>(&u);
+        if normals.len() != xi.len() {
+            return Err(PyValueError::new_err(format!(
+                "normals and u must have the same length, not {} and {}",
+                normals.len(),
+                xi.len()
+            )));
+        }
+        let factors: Vec<Factor> = normals.iter().map(|&n| Factor::cosine(n)).collect();
+        let product = self.product();
+        self.draw(py, xi.len(), |range, out| {
+            product.sample_batch(&factors[range.clone()], &xi[range], out)
+        })
+    }
+
+    /// The product sampler's pdf of `directions` `(N, 3)` at `normals` `(N, 3)`.
+    fn pdf_product<'py>(
+        &self,
+        py: Python<'py>,
+        normals: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let normals = rows::<3>(&normals, "normals")?;
+        let values = rows::<3>(&directions, "directions")?;
+        let normals = self::directions(&normals, self.frame);
+        let dirs = self::directions(&values, self.frame);
+        if normals.len() != dirs.len() {
+            return Err(PyValueError::new_err(format!(
+                "normals and directions must have the same length, not {} and {}",
+                normals.len(),
+                dirs.len()
+            )));
+        }
+        let factors: Vec<Factor> = normals.iter().map(|&n| Factor::cosine(n)).collect();
+        let mut out = vec![0.0f32; dirs.len()];
+        py.detach(|| self.product().pdf_batch(&factors, &dirs, &mut out));
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// The invariant checks of DESIGN.md §5 on this light (or, with `normal`, on
+    /// its product sampler at that normal), as `envlight verify` runs them: a
+    /// list of dicts with keys `check`, `value`, `threshold`, `samples`, `result`
+    /// (`pass`, `FAIL`, `info` or `skip`).
+    #[pyo3(signature = (*, samples=200_000, seed=0, normal=None))]
+    fn verify<'py>(
+        &self,
+        py: Python<'py>,
+        samples: usize,
+        seed: u64,
+        normal: Option<[f32; 3]>,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        if samples < 100 {
+            return Err(PyValueError::new_err("samples must be at least 100"));
+        }
+        let config = Config {
+            pdf_tolerance: 1e-3,
+            lobes: Lobes::Zenith,
+            reference: Reference::Midpoint,
+            ..Config::with_samples(samples, seed)
+        };
+        let normal = match normal {
+            Some(n) => Some(
+                self.frame
+                    .frame_to_z_up(Vec3::new(n[0], n[1], n[2]))
+                    .normalized()
+                    .ok_or_else(|| PyValueError::new_err("normal must be finite and non-zero"))?,
+            ),
+            None => None,
+        };
+        let rows = py.detach(|| {
+            if self.light.is_black() {
+                return envlight_verify::CHECKS
+                    .iter()
+                    .map(|c| {
+                        envlight_verify::Row::new(
+                            *c,
+                            "map is all black",
+                            "-",
+                            0,
+                            envlight_verify::Verdict::Skip,
+                        )
+                    })
+                    .collect::<Vec<_>>();
+            }
+            match normal {
+                Some(n) => {
+                    let at = AtShadingPoint::new(self.product(), Factor::cosine(n));
+                    let report = envlight_verify::run(&at, &at.integrand(), &config, &|_| {});
+                    report.rows("product")
+                }
+                None => {
+                    let sampler: &dyn SphereSampler = self.light.as_ref();
+                    let report =
+                        envlight_verify::run(sampler, &Integrand::luminance(), &config, &|_| {});
+                    report.rows(self.light.options().sampler.name())
+                }
+            }
+        });
+        rows.into_iter()
+            .map(|r| {
+                let d = PyDict::new(py);
+                d.set_item("check", r.check)?;
+                d.set_item("value", r.value)?;
+                d.set_item("threshold", r.threshold)?;
+                d.set_item("samples", r.samples)?;
+                d.set_item("result", r.verdict.label())?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// Width of the light's image in texels.
+    #[getter]
+    fn width(&self) -> usize {
+        self.light.image().width()
+    }
+
+    /// Height of the light's image in texels.
+    #[getter]
+    fn height(&self) -> usize {
+        self.light.image().height()
+    }
+
+    /// `(∫R dω, ∫G dω, ∫B dω)` over the sphere (scale applied).
+    #[getter]
+    fn integral_rgb(&self) -> (f64, f64, f64) {
+        let [r, g, b] = self.light.integral_rgb();
+        (r, g, b)
+    }
+
+    /// `∫Y dω` over the sphere.
+    #[getter]
+    fn integral_luminance(&self) -> f64 {
+        self.light.integral_luminance()
+    }
+
+    /// `(∫Y dω)² / ∫(Y²/p) dω`: 1 when the pdf is proportional to luminance.
+    #[getter]
+    fn efficiency(&self, py: Python<'_>) -> f64 {
+        py.detach(|| self.light.efficiency())
+    }
+
+    /// The direction of the brightest texel's centre, in this light's frame.
+    #[getter]
+    fn brightest_direction(&self) -> (f32, f32, f32) {
+        let d = self.frame.z_up_to_frame(self.light.brightest().1);
+        (d.x, d.y, d.z)
+    }
+
+    /// Bytes of sampling data.
+    #[getter]
+    fn sampling_bytes(&self) -> usize {
+        self.light.sampling_bytes()
+    }
+
+    /// `"z-up"` or `"y-up"`.
+    #[getter]
+    fn frame(&self) -> &'static str {
+        match self.frame {
+            Frame::ZUp => "z-up",
+            Frame::YUp => "y-up",
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let o = self.light.options();
+        format!(
+            "EnvironmentLight({}x{}, sampler={:?}, density={:?}, mapping={:?}, frame={:?})",
+            self.width(),
+            self.height(),
+            o.sampler.name(),
+            o.density.name(),
+            o.mapping.name(),
+            self.frame()
+        )
+    }
+}
+
+/// The native module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyEnvironmentLight>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

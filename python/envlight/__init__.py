@@ -1,0 +1,31 @@
+"""Image-based environment lighting with exact importance sampling.
+
+``EnvironmentLight`` loads an HDR panorama (``.hdr``, ``.exr``, ``.pfm``) or takes an
+``(H, W, 3)`` float32 array, builds a sampling distribution whose density follows
+the map's luminance, and answers in batches over numpy arrays (float32):
+
+- ``sample(u)``: ``u`` of shape ``(N, 2)`` in ``[0, 1)`` gives ``(directions (N, 3),
+  pdf (N,), radiance (N, 3))``, the pdf per steradian;
+- ``pdf(directions)``, ``radiance(directions)``, ``invert(directions)``;
+- ``sample_product(normals, u)`` and ``pdf_product(normals, directions)``: product
+  sampling at shading points, in proportion to radiance × max(0, n·ω);
+- ``verify()``: the invariant checks, as ``envlight verify`` prints them.
+
+Frames (``frame=``): ``"z-up"`` is the library's (a map point ``(u, v)`` looks
+along ``(sin θ cos φ, sin θ sin φ, cos θ)`` with ``θ = π v``, ``φ = 2π u``);
+``"y-up"`` is Mitsuba 3's envmap frame, ``(y, z, -x)`` of the z-up direction. The
+pdf per steradian is the same number in both.
+
+====================  ===============  ===============
+map point             z-up             y-up
+====================  ===============  ===============
+top row (v = 0)       (0, 0, 1)        (0, 1, 0)
+centre (0.5, 0.5)     (-1, 0, 0)       (0, 0, 1)
+u = 0.25, v = 0.5     (0, 1, 0)        (1, 0, 0)
+u = 0, v = 0.5        (1, 0, 0)        (0, 0, -1)
+====================  ===============  ===============
+"""
+
+from ._native import EnvironmentLight, __version__
+
+__all__ = ["EnvironmentLight", "__version__"]

@@ -1,0 +1,85 @@
+from os import PathLike
+from typing import Literal, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_F32 = npt.NDArray[np.float32]
+_Sampler = Literal["inversion", "alias", "hierarchical"]
+_Density = Literal["piecewise-constant", "piecewise-bilinear"]
+_Mapping = Literal["equirectangular", "equal-area"]
+_Lookup = Literal["bilinear", "nearest"]
+_Frame = Literal["z-up", "y-up"]
+
+class EnvironmentLight:
+    """An importance-sampled environment light (an HDR panorama at infinity)."""
+
+    def __init__(
+        self,
+        path: Union[str, PathLike[str]],
+        *,
+        sampler: _Sampler = "inversion",
+        density: _Density = "piecewise-constant",
+        mapping: _Mapping = "equirectangular",
+        lookup: _Lookup = "bilinear",
+        rotate: float = 0.0,
+        scale: float = 1.0,
+        frame: _Frame = "z-up",
+    ) -> None:
+        """Loads a map (.hdr, .exr, .pfm, or 8-bit .png/.jpg).
+
+        Raises FileNotFoundError for a missing file, OSError for one that cannot be
+        read or decoded, ValueError for a NaN or infinite texel (naming it) or an
+        unknown option."""
+    @staticmethod
+    def from_array(
+        rgb: _F32,
+        *,
+        sampler: _Sampler = "inversion",
+        density: _Density = "piecewise-constant",
+        mapping: _Mapping = "equirectangular",
+        lookup: _Lookup = "bilinear",
+        rotate: float = 0.0,
+        scale: float = 1.0,
+        frame: _Frame = "z-up",
+    ) -> "EnvironmentLight":
+        """A light from an (H, W, 3) float32 array of linear RGB (row 0 at the top)."""
+    def sample(self, u: _F32) -> Tuple[_F32, _F32, _F32]:
+        """(directions (N, 3), pdf (N,), radiance (N, 3)) for u of shape (N, 2).
+
+        A point that gives no direction (a black map) has direction 0 and pdf 0."""
+    def pdf(self, directions: _F32) -> _F32:
+        """Solid-angle pdf (per steradian) of each row of an (N, 3) array."""
+    def radiance(self, directions: _F32) -> _F32:
+        """Radiance (N, 3) arriving from each row of an (N, 3) array."""
+    def invert(self, directions: _F32) -> _F32:
+        """The u (N, 2) that sample() maps to each direction (not for "alias")."""
+    def sample_product(self, normals: _F32, u: _F32) -> Tuple[_F32, _F32, _F32]:
+        """Product sampling: one direction per shading point, with density
+        proportional to radiance × max(0, n·ω); normals and u of shape (N, 3), (N, 2)."""
+    def pdf_product(self, normals: _F32, directions: _F32) -> _F32:
+        """The product sampler's pdf of each direction at its normal."""
+    def verify(
+        self, *, samples: int = 200000, seed: int = 0, normal: Optional[Sequence[float]] = None
+    ) -> list[dict]:
+        """The invariant checks (normalisation, pdf consistency, invert, chi-square,
+        unbiasedness, support, efficiency) as a list of dicts with keys check, value,
+        threshold, samples, result ("pass", "FAIL", "info", "skip")."""
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def integral_rgb(self) -> Tuple[float, float, float]: ...
+    @property
+    def integral_luminance(self) -> float: ...
+    @property
+    def efficiency(self) -> float: ...
+    @property
+    def brightest_direction(self) -> Tuple[float, float, float]: ...
+    @property
+    def sampling_bytes(self) -> int: ...
+    @property
+    def frame(self) -> _Frame: ...

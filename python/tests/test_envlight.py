@@ -1,0 +1,253 @@
+"""The Python package against its contract: shapes and dtypes, pdf(sample)
+consistency, the Rust CLI's numbers on the same inputs, from_array against a file,
+the frames, every error path, and threads."""
+
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+import envlight
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+ENVMAPS = ROOT.parent / "shared" / "envmaps"
+
+
+def sky(h=32, w=64, seed=1):
+    """A small map: a smooth sky, a bright sun, some black texels."""
+    rng = np.random.default_rng(seed)
+    v = (np.arange(h) + 0.5) / h
+    rgb = np.empty((h, w, 3), np.float32)
+    rgb[...] = (0.2 + 0.8 * np.cos(np.pi * v / 2))[:, None, None] * np.array([0.5, 0.7, 1.0], np.float32)
+    rgb[h // 2 :, :, :] *= 0.3
+    rgb[5:7, 40:42, :] = 500.0
+    rgb[rng.random((h, w)) < 0.05] = 0.0
+    return rgb
+
+
+def write_pfm(path, rgb):
+    """A colour PFM (little-endian, rows stored bottom to top)."""
+    h, w, _ = rgb.shape
+    with open(path, "wb") as f:
+        f.write(f"PF\n{w} {h}\n-1.0\n".encode())
+        f.write(np.ascontiguousarray(rgb[::-1], dtype="<f4").tobytes())
+
+
+def uniform_u(n, seed=0):
+    return np.random.default_rng(seed).random((n, 2), dtype=np.float32)
+
+
+def unit(v):
+    v = np.asarray(v, np.float32)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@pytest.fixture(scope="module")
+def light():
+    return envlight.EnvironmentLight.from_array(sky())
+
+
+def test_shapes_dtypes_and_properties(light):
+    d, p, l = light.sample(uniform_u(1000))
+    assert d.shape == (1000, 3) and p.shape == (1000,) and l.shape == (1000, 3)
+    assert d.dtype == p.dtype == l.dtype == np.float32
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
+    assert (p > 0).all() and np.isfinite(l).all()
+    assert light.width == 64 and light.height == 32
+    assert len(light.integral_rgb) == 3 and light.integral_luminance > 0
+    assert 0 < light.efficiency <= 1
+    assert light.sampling_bytes > 0 and light.frame == "z-up"
+    assert np.isclose(np.linalg.norm(light.brightest_direction), 1.0, atol=1e-5)
+    assert "EnvironmentLight(64x32" in repr(light)
+    assert light.pdf(np.zeros((0, 3), np.float32)).shape == (0,)
+
+
+def test_pdf_of_samples_matches_and_radiance_is_the_maps(light):
+    d, p, l = light.sample(uniform_u(20000, 3))
+    assert np.allclose(light.pdf(d), p, rtol=1e-3)
+    assert np.allclose(light.radiance(d), l, rtol=1e-3, atol=1e-6)
+    # The sun is sampled far more often than its area would have it.
+    u = light.invert(d)
+    assert u.shape == (20000, 2) and ((u >= 0) & (u <= 1)).all()
+
+
+def test_monte_carlo_integral(light):
+    # E[Y/p] = ∫Y dω, within 5 standard errors.
+    d, p, l = light.sample(uniform_u(200000, 5))
+    y = l @ np.array([0.212671, 0.715160, 0.072169], np.float32)
+    w = y / p
+    assert abs(w.mean() - light.integral_luminance) < 5 * w.std() / np.sqrt(len(w))
+
+
+def test_non_contiguous_inputs_are_accepted(light):
+    u = np.asfortranarray(uniform_u(100))
+    d, p, _ = light.sample(u)
+    d2, p2, _ = light.sample(np.ascontiguousarray(u))
+    assert np.array_equal(d, d2) and np.array_equal(p, p2)
+    assert np.array_equal(light.pdf(d[::2]), light.pdf(np.ascontiguousarray(d[::2])))
+
+
+def test_from_array_equals_the_same_texels_from_a_file(tmp_path):
+    rgb = sky()
+    path = tmp_path / "sky.pfm"
+    write_pfm(path, rgb)
+    a = envlight.EnvironmentLight.from_array(rgb)
+    b = envlight.EnvironmentLight(path)
+    c = envlight.EnvironmentLight(str(path))
+    u = uniform_u(5000, 9)
+    for x in (b, c):
+        for got, want in zip(x.sample(u), a.sample(u)):
+            assert np.array_equal(got, want)
+        assert x.integral_rgb == a.integral_rgb
+
+
+def envlight_cli():
+    found = shutil.which("envlight")
+    if found:
+        return found
+    for profile in ("release", "debug"):
+        p = ROOT / "target" / profile / "envlight"
+        if p.exists():
+            return str(p)
+    return None
+
+
+def test_equal_to_the_rust_cli(tmp_path):
+    cli = envlight_cli()
+    if cli is None:
+        pytest.skip("the envlight binary is not built (cargo build --release)")
+    rgb = sky()
+    path = tmp_path / "sky.pfm"
+    write_pfm(path, rgb)
+    light = envlight.EnvironmentLight(path, rotate=30.0, scale=2.0)
+    d, p, l = light.sample(uniform_u(500, 4))
+    dirs = tmp_path / "dirs.csv"
+    np.savetxt(dirs, d, delimiter=",", header="x,y,z", comments="", fmt="%.9g")
+    out = subprocess.run(
+        [cli, "eval", str(path), "--rotate", "30", "--scale", "2", "--dirs", str(dirs)],
+        check=True, capture_output=True, text=True,
+    ).stdout
+    rows = np.loadtxt(out.splitlines()[1:], delimiter=",", dtype=np.float64)
+    # The CLI normalises the directions as written (9 digits): same texels, same pdf.
+    assert np.allclose(rows[:, 3], p, rtol=1e-5)
+    assert np.allclose(rows[:, 4:7], l, rtol=1e-4, atol=1e-6)
+    # And the pdf of the directions it read, bit for bit.
+    assert np.array_equal(light.pdf(rows[:, :3].astype(np.float32)), rows[:, 3].astype(np.float32))
+
+
+def test_frames():
+    rgb = sky()
+    z = envlight.EnvironmentLight.from_array(rgb)
+    y = envlight.EnvironmentLight.from_array(rgb, frame="y-up")
+    assert y.frame == "y-up"
+    u = uniform_u(2000, 2)
+    dz, pz, lz = z.sample(u)
+    dy, py_, ly = y.sample(u)
+    # y-up is (y, z, -x) of z-up; the pdf per steradian is the same number.
+    assert np.array_equal(dy, np.stack([dz[:, 1], dz[:, 2], -dz[:, 0]], axis=1))
+    assert np.array_equal(py_, pz) and np.array_equal(ly, lz)
+    assert np.array_equal(y.pdf(dy), z.pdf(dz))
+    # The map's centre looks along +z in y-up (Mitsuba's envmap), -x in z-up.
+    centre = np.array([[0.5, 0.5]], np.float32)
+    uniform = envlight.EnvironmentLight.from_array(np.ones((8, 16, 3), np.float32), frame="y-up")
+    inv = uniform.invert(np.array([[0.0, 0.0, 1.0]], np.float32))
+    assert np.allclose(inv, centre, atol=1e-6) or np.allclose(inv[:, 0], 0.5, atol=1e-6)
+    assert np.allclose(y.brightest_direction, [z.brightest_direction[1], z.brightest_direction[2], -z.brightest_direction[0]])
+
+
+def test_product_sampling():
+    light = envlight.EnvironmentLight.from_array(sky())
+    n = 4000
+    normals = unit(np.random.default_rng(1).normal(size=(n, 3)))
+    d, p, l = light.sample_product(normals, uniform_u(n, 6))
+    assert d.shape == (n, 3) and p.shape == (n,) and l.shape == (n, 3)
+    ok = p > 0
+    assert ok.mean() > 0.99
+    assert np.allclose(light.pdf_product(normals[ok], d[ok]), p[ok], rtol=1e-3)
+    # Nearly every sample lies above its surface.
+    assert (np.sum(d[ok] * normals[ok], axis=1) > -1e-3).mean() > 0.95
+    # A zero normal samples nothing.
+    d0, p0, _ = light.sample_product(np.zeros((3, 3), np.float32), uniform_u(3))
+    assert (p0 == 0).all() and (d0 == 0).all()
+
+
+def test_verify_passes():
+    light = envlight.EnvironmentLight.from_array(sky())
+    rows = light.verify(samples=20000)
+    assert [r["check"] for r in rows][:4] == ["normalisation", "pdf consistency", "invert", "chi-square"]
+    assert all(r["result"] in ("pass", "info") for r in rows), rows
+    rows = light.verify(samples=20000, normal=(0.0, 0.6, 0.8))
+    assert all(r["result"] in ("pass", "info", "skip") for r in rows), rows
+    black = envlight.EnvironmentLight.from_array(np.zeros((4, 8, 3), np.float32))
+    assert all(r["result"] == "skip" for r in black.verify())
+
+
+def test_options():
+    rgb = sky()
+    for kw in (
+        dict(sampler="alias"),
+        dict(sampler="hierarchical", mapping="equal-area"),
+        dict(density="piecewise-bilinear"),
+        dict(lookup="nearest", rotate=45.0, scale=3.0),
+    ):
+        light = envlight.EnvironmentLight.from_array(rgb, **kw)
+        d, p, _ = light.sample(uniform_u(1000))
+        assert np.allclose(light.pdf(d), p, rtol=1e-3), kw
+    with pytest.raises(ValueError, match="alias sampler has no inverse"):
+        envlight.EnvironmentLight.from_array(rgb, sampler="alias").invert(np.zeros((1, 3), np.float32))
+
+
+def test_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.exr"):
+        envlight.EnvironmentLight(tmp_path / "missing.exr")
+    garbage = tmp_path / "garbage.hdr"
+    garbage.write_bytes(b"not an image at all")
+    with pytest.raises(OSError, match="garbage.hdr"):
+        envlight.EnvironmentLight(garbage)
+    rgb = sky()
+    rgb[3, 7, 1] = np.nan
+    with pytest.raises(ValueError, match=r"texel \(7, 3\)"):
+        envlight.EnvironmentLight.from_array(rgb)
+    nan_file = tmp_path / "nan.pfm"
+    write_pfm(nan_file, rgb)
+    with pytest.raises(ValueError, match=r"nan.pfm.*\(7, 3\)"):
+        envlight.EnvironmentLight(nan_file)
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        envlight.EnvironmentLight.from_array(np.ones((4, 8, 4), np.float32))
+    with pytest.raises(TypeError, match="float32"):
+        envlight.EnvironmentLight.from_array(np.ones((4, 8, 3), np.float64))
+    light = envlight.EnvironmentLight.from_array(sky())
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        light.sample(np.ones((5, 3), np.float32))
+    with pytest.raises(TypeError):
+        light.sample(np.ones((5, 2), np.float64))
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        light.pdf(np.ones((5, 2), np.float32))
+    with pytest.raises(ValueError, match="same length"):
+        light.pdf_product(np.ones((5, 3), np.float32), np.ones((4, 3), np.float32))
+    for kw in (dict(sampler="bogus"), dict(frame="x-up"), dict(scale=-1.0), dict(rotate=float("nan"))):
+        with pytest.raises(ValueError):
+            envlight.EnvironmentLight.from_array(sky(), **kw)
+
+
+def test_threads_give_identical_results(light):
+    u = uniform_u(100000, 8)
+    want = light.sample(u)
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda _: light.sample(u), range(8)))
+    for got in results:
+        for g, w in zip(got, want):
+            assert np.array_equal(g, w)
+
+
+@pytest.mark.skipif(not (ENVMAPS / "sunrise.exr").exists(), reason="../shared/envmaps/sunrise.exr not found")
+def test_real_map():
+    light = envlight.EnvironmentLight(ENVMAPS / "sunrise.exr")
+    d, p, _ = light.sample(uniform_u(10000))
+    assert np.allclose(light.pdf(d), p, rtol=1e-3)
+    assert 0.7 < light.efficiency < 0.9
