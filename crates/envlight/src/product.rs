@@ -484,6 +484,8 @@ pub struct ProductSampler {
     /// `(level, i, j)` (level an index into the pyramid, or its length for the
     /// patches), every lit patch under exactly one of them.
     cut: Vec<(usize, usize, usize)>,
+    /// The cut's nodes, in its order, side by side (what every shading point reads).
+    cut_nodes: Vec<Patch>,
     /// For each patch, the index of the cut node above it (`u32::MAX` for a
     /// patch without power).
     patch_cut: Vec<u32>,
@@ -677,9 +679,17 @@ impl ProductSampler {
                 }
             }
         }
+        let cut_nodes = cut
+            .iter()
+            .map(|&(level, i, j)| {
+                let (nodes, size) = level_of(level);
+                nodes[j * size[0] + i]
+            })
+            .collect();
         Self {
             pyramid,
             cut,
+            cut_nodes,
             patch_cut,
             planar_scale: (w as f64 / CDF_ONE as f64) * (h as f64 / CDF_ONE as f64),
             bound: options.bound,
@@ -990,8 +1000,8 @@ impl ShadingPoint<'_> {
         };
         let sampler = self.sampler;
         let mut sum = 0.0f64;
-        for (&(level, i, j), running) in sampler.cut.iter().zip(&mut self.running[1..]) {
-            let weight = sampler.weight(target, sampler.node(level, i, j));
+        for (node, running) in sampler.cut_nodes.iter().zip(&mut self.running[1..]) {
+            let weight = sampler.weight(target, node);
             let next = sum + weight;
             sum = if weight > 0.0 && next == sum {
                 sum.next_up()
