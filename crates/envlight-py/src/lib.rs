@@ -70,51 +70,18 @@ fn light_options(
     rotate: f32,
     scale: f32,
 ) -> PyResult<LightOptions> {
-    let choice = |what: &str, value: &str, names: &[&str]| {
-        PyValueError::new_err(format!(
-            "{what} must be one of {}, not {value:?}",
-            names.join(", ")
-        ))
-    };
-    let sampler = match sampler {
-        "inversion" => Sampler::Inversion,
-        "alias" => Sampler::Alias,
-        "hierarchical" => Sampler::Hierarchical,
-        _ => {
-            return Err(choice(
-                "sampler",
-                sampler,
-                &["inversion", "alias", "hierarchical"],
-            ))
-        }
-    };
-    let density = match density {
-        "piecewise-constant" => Density::PiecewiseConstant,
-        "piecewise-bilinear" => Density::PiecewiseBilinear,
-        _ => {
-            return Err(choice(
-                "density",
-                density,
-                &["piecewise-constant", "piecewise-bilinear"],
-            ))
-        }
-    };
-    let mapping = match mapping {
-        "equirectangular" => Mapping::Equirectangular,
-        "equal-area" => Mapping::EqualArea,
-        _ => {
-            return Err(choice(
-                "mapping",
-                mapping,
-                &["equirectangular", "equal-area"],
-            ))
-        }
-    };
-    let lookup = match lookup {
-        "bilinear" => Lookup::Bilinear,
-        "nearest" => Lookup::Nearest,
-        _ => return Err(choice("lookup", lookup, &["bilinear", "nearest"])),
-    };
+    let sampler = choose("sampler", sampler, &Sampler::ALL, |s| s.name())?;
+    let density = choose("density", density, &Density::ALL, |d| d.name())?;
+    let mapping = choose("mapping", mapping, &Mapping::ALL, |m| m.name())?;
+    let lookup = choose(
+        "lookup",
+        lookup,
+        &[Lookup::Bilinear, Lookup::Nearest],
+        |l| match l {
+            Lookup::Bilinear => "bilinear",
+            Lookup::Nearest => "nearest",
+        },
+    )?;
     if !rotate.is_finite() {
         return Err(PyValueError::new_err(format!(
             "rotate must be finite, not {rotate}"
@@ -134,6 +101,25 @@ fn light_options(
         scale,
         ..Default::default()
     })
+}
+
+/// The option among `all` whose `name` is `value`, or a `ValueError` listing them.
+fn choose<T: Copy>(
+    what: &str,
+    value: &str,
+    all: &[T],
+    name: impl Fn(T) -> &'static str,
+) -> PyResult<T> {
+    all.iter()
+        .copied()
+        .find(|&t| name(t) == value)
+        .ok_or_else(|| {
+            let names: Vec<&str> = all.iter().map(|&t| name(t)).collect();
+            PyValueError::new_err(format!(
+                "{what} must be one of {}, not {value:?}",
+                names.join(", ")
+            ))
+        })
 }
 
 /// The Python exception for a library error.
