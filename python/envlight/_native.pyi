@@ -56,11 +56,27 @@ class EnvironmentLight:
         """Radiance (N, 3) arriving from each row of an (N, 3) array."""
     def invert(self, directions: _F32) -> _F32:
         """The u (N, 2) that sample() maps to each direction (not for "alias")."""
-    def sample_product(self, normals: _F32, u: _F32) -> Tuple[_F32, _F32, _F32]:
+    def sample_product(
+        self,
+        normals: _F32,
+        u: _F32,
+        *,
+        outgoing: Optional[_F32] = None,
+        roughness: Optional[float] = None,
+    ) -> Tuple[_F32, _F32, _F32]:
         """Product sampling: one direction per shading point, with density
-        proportional to radiance × max(0, n·ω); normals and u of shape (N, 3), (N, 2)."""
-    def pdf_product(self, normals: _F32, directions: _F32) -> _F32:
-        """The product sampler's pdf of each direction at its normal."""
+        proportional to radiance × max(0, n·ω) (normals (N, 3), u (N, 2)); with
+        outgoing (N, 3) and roughness in (0, 1], also times a GGX lobe proxy about
+        the mirror direction of outgoing."""
+    def pdf_product(
+        self,
+        normals: _F32,
+        directions: _F32,
+        *,
+        outgoing: Optional[_F32] = None,
+        roughness: Optional[float] = None,
+    ) -> _F32:
+        """The product sampler's pdf of each direction at its shading point."""
     def verify(
         self, *, samples: int = 200000, seed: int = 0, normal: Optional[Sequence[float]] = None
     ) -> list[dict]:

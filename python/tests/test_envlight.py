@@ -174,6 +174,19 @@ def test_product_sampling():
     # A zero normal samples nothing.
     d0, p0, _ = light.sample_product(np.zeros((3, 3), np.float32), uniform_u(3))
     assert (p0 == 0).all() and (d0 == 0).all()
+    # The glossy form: samples gather around the mirror direction.
+    up = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (n, 1))
+    wo = np.tile(unit([[0.6, 0.0, 0.8]]), (n, 1))
+    d, p, _ = light.sample_product(up, uniform_u(n, 7), outgoing=wo, roughness=0.05)
+    ok = p > 0
+    assert np.allclose(light.pdf_product(up[ok], d[ok], outgoing=wo[ok], roughness=0.05), p[ok], rtol=1e-3)
+    mirror = np.array([-0.6, 0.0, 0.8], np.float32)
+    diffuse, _, _ = light.sample_product(up, uniform_u(n, 7))
+    assert np.median(d[ok] @ mirror) > 0.95 > np.median(diffuse @ mirror)
+    with pytest.raises(ValueError, match="together"):
+        light.sample_product(up, uniform_u(n), roughness=0.1)
+    with pytest.raises(ValueError, match="roughness"):
+        light.sample_product(up, uniform_u(n), outgoing=wo, roughness=0.0)
 
 
 def test_verify_passes():

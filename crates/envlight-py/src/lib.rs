@@ -207,6 +207,53 @@ impl PyEnvironmentLight {
         })
     }
 
+    /// One factor per shading point: the clamped cosine of each normal, or with
+    /// `outgoing` and `roughness` the cosine times the GGX lobe proxy; `n` rows
+    /// expected (the length of `other`).
+    fn factors(
+        &self,
+        normals: &PyReadonlyArray2<'_, f32>,
+        outgoing: Option<&PyReadonlyArray2<'_, f32>>,
+        roughness: Option<f32>,
+        n: usize,
+        other: &str,
+    ) -> PyResult<Vec<Factor>> {
+        let normals = rows::<3>(normals, "normals")?;
+        let normals = self::directions(&normals, self.frame);
+        if normals.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "normals and {other} must have the same length, not {} and {n}",
+                normals.len()
+            )));
+        }
+        match (outgoing, roughness) {
+            (None, None) => Ok(normals.iter().map(|&n| Factor::cosine(n)).collect()),
+            (Some(outgoing), Some(alpha)) => {
+                if !(alpha > 0.0 && alpha <= 1.0) {
+                    return Err(PyValueError::new_err(format!(
+                        "roughness must be in (0, 1], not {alpha}"
+                    )));
+                }
+                let outgoing = rows::<3>(outgoing, "outgoing")?;
+                let outgoing = self::directions(&outgoing, self.frame);
+                if outgoing.len() != n {
+                    return Err(PyValueError::new_err(format!(
+                        "outgoing must have {n} rows, not {}",
+                        outgoing.len()
+                    )));
+                }
+                Ok(normals
+                    .iter()
+                    .zip(outgoing.iter())
+                    .map(|(&n, &wo)| Factor::glossy(n, wo, alpha))
+                    .collect())
+            }
+            _ => Err(PyValueError::new_err(
+                "outgoing and roughness go together: give both or neither",
+            )),
+        }
+    }
+
     fn product(&self) -> &ProductSampler {
         self.product
             .get_or_init(|| ProductSampler::new(self.light.clone(), ProductOptions::default()))
@@ -398,50 +445,47 @@ impl PyEnvironmentLight {
 
     /// Product sampling at shading points: `(directions, pdf, radiance)` for
     /// `normals` `(N, 3)` and `u` `(N, 2)`, drawn in proportion to radiance ×
-    /// max(0, n·ω). A zero or non-finite normal gives pdf 0.
+    /// max(0, n·ω), or with `outgoing` `(N, 3)` and `roughness` also times a GGX
+    /// lobe proxy about the mirror direction. A zero or non-finite normal gives
+    /// pdf 0.
+    #[pyo3(signature = (normals, u, *, outgoing=None, roughness=None))]
     fn sample_product<'py>(
         &self,
         py: Python<'py>,
         normals: PyReadonlyArray2<'py, f32>,
         u: PyReadonlyArray2<'py, f32>,
+        outgoing: Option<PyReadonlyArray2<'py, f32>>,
+        roughness: Option<f32>,
     ) -> PyResult<Samples<'py>> {
-        let normals = rows::<3>(&normals, "normals")?;
         let u = rows::<2>(&u, "u")?;
-        let normals = self::directions(&normals, self.frame);
         let xi = as_arrays::<2>(&u);
-        if normals.len() != xi.len() {
-            return Err(PyValueError::new_err(format!(
-                "normals and u must have the same length, not {} and {}",
-                normals.len(),
-                xi.len()
-            )));
-        }
-        let factors: Vec<Factor> = normals.iter().map(|&n| Factor::cosine(n)).collect();
+        let factors = self.factors(&normals, outgoing.as_ref(), roughness, xi.len(), "u")?;
         let product = self.product();
         self.draw(py, xi.len(), |range, out| {
             product.sample_batch(&factors[range.clone()], &xi[range], out)
         })
     }
 
-    /// The product sampler's pdf of `directions` `(N, 3)` at `normals` `(N, 3)`.
+    /// The product sampler's pdf of `directions` `(N, 3)` at `normals` `(N, 3)`
+    /// (and `outgoing`, `roughness`, as in `sample_product`).
+    #[pyo3(signature = (normals, directions, *, outgoing=None, roughness=None))]
     fn pdf_product<'py>(
         &self,
         py: Python<'py>,
         normals: PyReadonlyArray2<'py, f32>,
         directions: PyReadonlyArray2<'py, f32>,
+        outgoing: Option<PyReadonlyArray2<'py, f32>>,
+        roughness: Option<f32>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
-        let normals = rows::<3>(&normals, "normals")?;
         let values = rows::<3>(&directions, "directions")?;
-        let normals = self::directions(&normals, self.frame);
         let dirs = self::directions(&values, self.frame);
-        if normals.len() != dirs.len() {
-            return Err(PyValueError::new_err(format!(
-                "normals and directions must have the same length, not {} and {}",
-                normals.len(),
-                dirs.len()
-            )));
-        }
-        let factors: Vec<Factor> = normals.iter().map(|&n| Factor::cosine(n)).collect();
+        let factors = self.factors(
+            &normals,
+            outgoing.as_ref(),
+            roughness,
+            dirs.len(),
+            "directions",
+        )?;
         let mut out = vec![0.0f32; dirs.len()];
         py.detach(|| self.product().pdf_batch(&factors, &dirs, &mut out));
         Ok(PyArray1::from_vec(py, out))
