@@ -3,33 +3,48 @@
 //! pdf, for a factor `f` that is the clamped cosine or the cosine times a glossy
 //! lobe ([`Factor`]).
 //!
-//! **Two levels** (Conty Estevez and Lecocq 2018):
+//! **Levels** (after the two-level scheme of Conty Estevez and Lecocq 2018):
 //! - *fine*: the light's own piecewise-constant importance over its texel grid,
 //!   `f_t = Y(filtered) · J_j` (DESIGN.md §4 step 1, never MIS-compensated), whatever
 //!   sampler, density or mapping the light uses. Its support covers the light's
 //!   radiance: for bilinear lookups the importance is filtered with the `[1 6 1]`
 //!   blur, which covers the bilinear reconstruction's support.
-//! - *coarse*: the texel grid cut into `Pw × Ph` rectangular blocks of texels
-//!   (*patches*), block edges at texel edges. Patch `k` holds the fraction `P_k` of
-//!   the fine importance inside it and a cone bounding its directions.
+//! - *patches*: the texel grid cut into `Pw × Ph` rectangular blocks of texels
+//!   (128 × 64 by default), block edges at texel edges.
+//! - *pyramid*: patches grouped 2 × 2 level by level up to a single root. Every
+//!   node (patch or group) holds the fraction `P` of the fine importance inside it
+//!   and the regions bounding the directions of its *lit* texels: a cone, and on a
+//!   lat-long light the exact (θ, φ) box of the texel rectangle.
+//! - *cut*: nodes chosen once, from the root down, replacing any node with more
+//!   than `1 / top_nodes` of the power by its children, so that bright regions are
+//!   cut down to single patches and dim ones stay coarse.
 //!
-//! **At a shading point** each patch gets the weight `w_k = P_k · B_k`, where `B_k`
-//! is an *upper bound* of `f` over the whole patch, computed from its cone (never
-//! the value at its centre: a patch straddling the horizon would get weight 0 while
-//! part of it is lit, which is bias). Sampling draws a patch with probability
-//! `w_k / Σw`, then a texel inside it from the fine importance restricted to the
-//! patch (a row from the patch's marginal, then a texel from that row's segment),
-//! then a point uniformly inside the texel, mapped to a direction with the light's
-//! mapping and rotation:
+//! **Weights.** A node's weight at a shading point is `w = P · B`, where `B` is an
+//! *upper bound* of `f` over the node's lit directions (never the value at its
+//! centre: a patch straddling the horizon would get weight 0 while part of it is
+//! lit, which is bias). For the cosine, `B = max(0, max n·ω)`; over a lat-long box
+//! the maximum of `v·ω` is exact (the largest `cos(φ - φ_v)` over the φ range,
+//! then the peak of `a sin θ + v_z cos θ` over the θ range), over a cone it is
+//! `cos(max(0, α - h))`. The glossy lobe's bound is its value at the largest
+//! `r·ω` (it falls with the angle to the mirror direction `r`).
+//!
+//! **Sampling.** [`ProductSampler::at`] weighs the cut's nodes; a sample picks one
+//! by `w / Σw`, then descends the pyramid to a patch, choosing among each node's
+//! children by their weights (if all of them are 0 by rounding, by their power),
+//! then a texel inside the patch from the fine importance restricted to it (a row
+//! from the patch's marginal, then a texel from that row's segment), then a point
+//! uniformly inside the texel, mapped to a direction with the light's mapping and
+//! rotation:
 //!
 //! ```text
-//! p(ω | n) = (w_k / Σw) · (f_t / F_k) · w h / J(ω)
+//! p(ω | n) = (w_cut / Σw) · Π (w_child / Σ w_siblings) · (f_t / F_k) · w h / J(ω)
 //! ```
 //!
-//! with `F_k = Σ_{t ∈ k} f_t`, `w h` the reciprocal of a texel's area in `(u, v)`,
-//! and `J = dω / du dv` (`2π² sin θ` or `4π`). `f_t / F_k` is read from the same
-//! fixed-point CDFs that sampling inverts (see [`crate::distribution`]), and
-//! `w_k / Σw` from the same running sums, so [`ShadingPoint::pdf`] is the exact
+//! with `F_k = Σ_{t ∈ k} f_t` over patch `k`, `w h` the reciprocal of a texel's
+//! area in `(u, v)`, and `J = dω / du dv` (`2π² sin θ` or `4π`). `f_t / F_k` is read
+//! from the same fixed-point CDFs that sampling inverts (see
+//! [`crate::distribution`]), and every choice's probability from the same
+//! weights computed by the same function, so [`ShadingPoint::pdf`] is the exact
 //! density of [`ShadingPoint::sample`]; it integrates to 1 over the sphere, and it
 //! is positive wherever `L · f > 0` (up to the measure-zero poles of a lat-long
 //! map, where it is 0 as for the light).
@@ -428,14 +443,17 @@ impl Target {
 /// positive (except at the poles of a lat-long map); a black map, an invalid factor,
 /// or a factor that is 0 over all the light samples nothing (`None`, pdf 0).
 ///
-/// Cost: building is `O(w h)` (rows in parallel) plus `O(Pw Ph)` cone bounds; each
-/// shading point ([`Self::at`]) is `O(Pw Ph)`; then each sample is three binary
-/// searches (patch, row, texel) and each pdf a few lookups, without allocation.
+/// Cost: building is `O(w h)` (rows in parallel) plus two bounding regions per
+/// pyramid node; each shading point ([`Self::at`]) one bound per cut node (about
+/// 3 µs for the default cut of 512 on one core); each sample and each pdf four
+/// bounds per pyramid level below the cut, and binary searches for the row and
+/// texel, without allocation (BENCHMARKS.md has the measured trade-offs).
 ///
 /// Memory: a fixed-point CDF entry per texel plus one per row segment and per patch
-/// row: `4 h (w + Pw) + 4 Pw (h + Ph)` bytes, about `4 + 8 Pw / w` bytes per texel
-/// (4.06 for a 4096 × 2048 map with the default 32 × 16 patches), plus 48 bytes per
-/// patch and `4 (w + h)` bytes of index tables; see [`Self::memory_bytes`].
+/// row, `4 h (w + Pw) + 4 Pw (h + Ph)` bytes (about `4 + 8 Pw / w` bytes per
+/// texel), `4 (w + h)` bytes of index tables, and the pyramid's nodes
+/// (`Pw Ph · 4/3` of them, about 1.4 MB at 128 × 64 patches); see
+/// [`Self::memory_bytes`].
 ///
 /// ```
 /// use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
