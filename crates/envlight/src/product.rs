@@ -751,9 +751,13 @@ impl ProductSampler {
             + self.col_start.len()
             + self.row_start.len()
             + self.col_patch.len()
-            + self.row_patch.len())
+            + self.row_patch.len()
+            + self.patch_cut.len())
             + std::mem::size_of::<Patch>()
-                * (self.patch.len() + self.pyramid.iter().map(|l| l.nodes.len()).sum::<usize>())
+                * (self.patch.len()
+                    + self.cut_nodes.len()
+                    + self.pyramid.iter().map(|l| l.nodes.len()).sum::<usize>())
+            + std::mem::size_of::<(usize, usize, usize)>() * self.cut.len()
     }
 
     /// The sampling state at a shading point with factor `factor`: the factor's
