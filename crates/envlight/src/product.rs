@@ -452,7 +452,7 @@ impl Target {
 /// Memory: a fixed-point CDF entry per texel plus one per row segment and per patch
 /// row, `4 h (w + Pw) + 4 Pw (h + Ph)` bytes (about `4 + 8 Pw / w` bytes per
 /// texel), `4 (w + h)` bytes of index tables, and the pyramid's nodes
-/// (`Pw Ph · 4/3` of them, about 1.4 MB at 128 × 64 patches); see
+/// (`Pw Ph · 4/3` of them, about 1.5 MB at 128 × 64 patches); see
 /// [`Self::memory_bytes`].
 ///
 /// ```
