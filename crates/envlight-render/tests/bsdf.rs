@@ -5,7 +5,8 @@
 
 mod common;
 
-use common::{chi_square, mean_and_error, polar};
+use common::{mean_and_error, polar};
+use envlight_verify::chi_square_warp as chi_square;
 use envlight::rng::SplitMix64;
 use envlight::Vec3;
 use envlight_render::bsdf::Bsdf;

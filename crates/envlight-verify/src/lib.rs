@@ -46,7 +46,7 @@ mod stats;
 mod suite;
 
 pub use checks::black::{black, Black};
-pub use checks::chi_square::{chi_square, ChiSquare, CHI2_QUADRATURE_CELLS, MIN_EXPECTED};
+pub use checks::chi_square::{chi_square, pearson, ChiSquare, CHI2_QUADRATURE_CELLS, MIN_EXPECTED};
 pub use checks::consistency::{consistency, Consistency};
 pub use checks::normalisation::{normalisation, Normalisation};
 pub use checks::support::{support, Support};
@@ -54,13 +54,14 @@ pub use checks::unbiasedness::{
     efficiency, lobe_normals, unbiasedness, Efficiency, Estimate, Reference, Unbiasedness,
     MASS_RESOLUTION, MAX_LOBES,
 };
+pub use checks::warp::{chi_square_warp, WarpChiSquare};
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};
 pub use product::AtShadingPoint;
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
-pub use stats::{fits, over_samples, Moments};
+pub use stats::{fits, over_points, over_samples, Moments};
 pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report, CHECKS};
 
 /// Significance level of every chi-square test: a correct sampler is rejected with

@@ -14,6 +14,17 @@ pub fn over_samples<A: Send>(
     init: impl Fn() -> A + Sync,
     body: impl Fn(&mut A, [f32; 2]) + Sync,
 ) -> Vec<A> {
+    over_points(n, seed, init, body)
+}
+
+/// [`over_samples`] for points of any dimension `D` (the first two coordinates of
+/// each point are those `over_samples` gives for the same seed).
+pub fn over_points<A: Send, const D: usize>(
+    n: usize,
+    seed: u64,
+    init: impl Fn() -> A + Sync,
+    body: impl Fn(&mut A, [f32; D]) + Sync,
+) -> Vec<A> {
     (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
@@ -22,7 +33,7 @@ pub fn over_samples<A: Send>(
             let mut rng = Pcg64Mcg::seed_from_u64(stream);
             let mut acc = init();
             for _ in 0..CHUNK.min(n - c * CHUNK) {
-                let xi = [rng.random::<f32>(), rng.random::<f32>()];
+                let xi = [(); D].map(|_| rng.random::<f32>());
                 body(&mut acc, xi);
             }
             acc

@@ -235,14 +235,37 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
         )
     };
 
-    // Pool small bins in increasing order of expectation.
+    let observed: Vec<f64> = observed.iter().map(|&o| o as f64).collect();
+    let (statistic, used_bins, dof, p_value) = pearson(&observed, &expected);
+    let p_value = if outside_support > 0 { 0.0 } else { p_value };
+    ChiSquare {
+        samples: n,
+        none,
+        bins: [bins_u, bins_v],
+        used_bins,
+        dof,
+        statistic,
+        p_value,
+        outside_support: outside_support as usize,
+        worst_bin,
+        expected_mass,
+        nudged,
+    }
+}
+
+/// Pearson's statistic of `observed` against `expected` counts, bins with
+/// expectation 0 left out, bins expecting fewer than [`MIN_EXPECTED`] pooled in
+/// increasing order of expectation (Mitsuba's rule): `(statistic, bins used,
+/// degrees of freedom, P(χ²_dof ≥ statistic))`. Every chi-square test of the
+/// harness ends here.
+pub fn pearson(observed: &[f64], expected: &[f64]) -> (f64, usize, usize, f64) {
     let mut order: Vec<usize> = (0..expected.len()).filter(|&k| expected[k] > 0.0).collect();
     order.sort_by(|&a, &b| expected[a].total_cmp(&expected[b]).then(a.cmp(&b)));
     let mut statistic = 0.0;
     let mut used_bins = 0usize;
     let (mut pool_o, mut pool_e) = (0.0f64, 0.0f64);
     for &k in &order {
-        pool_o += observed[k] as f64;
+        pool_o += observed[k];
         pool_e += expected[k];
         if pool_e >= MIN_EXPECTED {
             statistic += (pool_o - pool_e).powi(2) / pool_e;
@@ -258,24 +281,8 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
         used_bins += 1;
     }
     let dof = used_bins.saturating_sub(1).max(1);
-    let p_value = if outside_support > 0 {
-        0.0
-    } else {
-        ChiSquared::new(dof as f64)
-            .map(|c| c.sf(statistic))
-            .unwrap_or(f64::NAN)
-    };
-    ChiSquare {
-        samples: n,
-        none,
-        bins: [bins_u, bins_v],
-        used_bins,
-        dof,
-        statistic,
-        p_value,
-        outside_support: outside_support as usize,
-        worst_bin,
-        expected_mass,
-        nudged,
-    }
+    let p_value = ChiSquared::new(dof as f64)
+        .map(|c| c.sf(statistic))
+        .unwrap_or(f64::NAN);
+    (statistic, used_bins, dof, p_value)
 }

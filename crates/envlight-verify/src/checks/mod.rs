@@ -6,3 +6,4 @@ pub mod consistency;
 pub mod normalisation;
 pub mod support;
 pub mod unbiasedness;
+pub mod warp;
