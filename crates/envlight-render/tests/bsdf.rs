@@ -6,11 +6,11 @@
 mod common;
 
 use common::{mean_and_error, polar};
-use envlight_verify::chi_square_warp as chi_square;
 use envlight::rng::SplitMix64;
 use envlight::Vec3;
 use envlight_render::bsdf::Bsdf;
 use envlight_render::warp::square_to_uniform_sphere;
+use envlight_verify::chi_square_warp as chi_square;
 
 const COPPER_ETA: [f32; 3] = [0.200, 0.924, 1.102];
 const COPPER_K: [f32; 3] = [3.912, 2.452, 2.142];
