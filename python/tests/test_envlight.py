@@ -71,9 +71,10 @@ def test_pdf_of_samples_matches_and_radiance_is_the_maps(light):
     d, p, l = light.sample(uniform_u(20000, 3))
     assert np.allclose(light.pdf(d), p, rtol=1e-3)
     assert np.allclose(light.radiance(d), l, rtol=1e-3, atol=1e-6)
-    # The sun is sampled far more often than its area would have it.
-    u = light.invert(d)
-    assert u.shape == (20000, 2) and ((u >= 0) & (u <= 1)).all()
+    # invert() maps the samples back to the u that drew them.
+    back = light.invert(d)
+    assert back.shape == (20000, 2)
+    assert np.allclose(back, uniform_u(20000, 3), atol=1e-3)
 
 
 def test_monte_carlo_integral(light):
@@ -156,7 +157,7 @@ def test_frames():
     centre = np.array([[0.5, 0.5]], np.float32)
     uniform = envlight.EnvironmentLight.from_array(np.ones((8, 16, 3), np.float32), frame="y-up")
     inv = uniform.invert(np.array([[0.0, 0.0, 1.0]], np.float32))
-    assert np.allclose(inv, centre, atol=1e-6) or np.allclose(inv[:, 0], 0.5, atol=1e-6)
+    assert np.allclose(inv, centre, atol=1e-6)
     assert np.allclose(y.brightest_direction, [z.brightest_direction[1], z.brightest_direction[2], -z.brightest_direction[0]])
 
 

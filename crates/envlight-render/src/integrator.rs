@@ -91,8 +91,8 @@ impl<'a> Integrator<'a> {
     }
 
     /// Working state for [`Self::li_with`], one per thread: for the product
-    /// strategies one [`ShadingPoint`] (an allocation of `Pw Ph + 1` doubles, made
-    /// here and never again).
+    /// strategies one [`ShadingPoint`] (an allocation of one double per node of the
+    /// sampler's cut, made here and never again).
     pub fn scratch(&self) -> Scratch<'_> {
         Scratch {
             // An invalid (zero) factor: no bounds are computed until a vertex sets one.

@@ -109,6 +109,15 @@ impl Scene {
         }
     }
 
+    /// The camera of the scenes on the ground plane (`balls`, `diffuse`).
+    fn ground_camera() -> Camera {
+        Camera {
+            position: Vec3::new(0.0, -9.5, 2.6),
+            look_at: Vec3::new(0.0, 0.0, 0.8),
+            vfov_degrees: 32.0,
+        }
+    }
+
     fn balls() -> Scene {
         let sphere = |name: &'static str, x: f32, bsdf: Bsdf| Object {
             name,
@@ -168,11 +177,7 @@ impl Scene {
         ];
         Scene {
             name: "balls".into(),
-            camera: Camera {
-                position: Vec3::new(0.0, -9.5, 2.6),
-                look_at: Vec3::new(0.0, 0.0, 0.8),
-                vfov_degrees: 32.0,
-            },
+            camera: Self::ground_camera(),
             objects,
         }
     }
@@ -206,7 +211,7 @@ impl Scene {
         ];
         Scene {
             name: "diffuse".into(),
-            camera: Self::balls().camera,
+            camera: Self::ground_camera(),
             objects,
         }
     }

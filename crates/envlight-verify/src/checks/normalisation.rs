@@ -49,7 +49,7 @@ impl Normalisation {
         Row::new(
             "normalisation",
             format!("∫p dω = {:.7} ({})", self.integral, self.rule),
-            "|1 - ∫p dω| < 1e-3",
+            format!("|1 - ∫p dω| < {NORMALISATION_TOLERANCE:.0e}"),
             0,
             Verdict::from_pass(self.verdict(black).is_ok()),
         )
