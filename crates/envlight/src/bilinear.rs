@@ -11,45 +11,50 @@
 //! `V = 0, (j + ½)/h, 1` with copies of the first and last texel rows at `v = 0` and
 //! `v = 1`.
 //!
-//! Sampling inverts the marginal in v, then the conditional in u:
+//! Sampling picks a patch, then a point in it. The patches' masses
+//! `M_ik = (U_{i+1} - U_i)(V_{k+1} - V_k)(f_00 + f_10 + f_01 + f_11) / 4` (exact for
+//! the bilinear interpolant of the corners `f_ab`) go into a piecewise-constant
+//! [`Distribution2D`] over the patch grid, whose fixed-point CDFs and guide tables
+//! pick patch `[i, k]` with probability `P_ik ≈ M_ik / I` in O(1) and leave the two
+//! offsets of `ξ` within the patch's CDF segments, `(s, r) ∈ [0, 1)²`, free. Inside
+//! the patch, in local coordinates `(x, y) ∈ [0, 1]²`, the bilinear function's
+//! marginal in `y` is linear with ends `f_00 + f_10` and `f_01 + f_11`: `r` gives
+//! `y`; at that `y` the conditional in `x` is linear with ends `lerp(y, f_00, f_01)`
+//! and `lerp(y, f_10, f_11)`: `s` gives `x`. The density of the whole procedure is
 //!
 //! ```text
-//! R_k   = ∫ B(u, V_k) du = Σ_i (U_{i+1} - U_i)(f[k][i] + f[k][i+1]) / 2   (exact: linear in u)
-//! m(v)  = ∫ B(u, v) du = (1 - t) R_k + t R_{k+1},   t = (v - V_k) / (V_{k+1} - V_k)
-//! M_k   = (V_{k+1} - V_k)(R_k + R_{k+1}) / 2,   I = Σ_k M_k
+//! p(u, v) = P_ik · B(u, v) / M_ik
 //! ```
 //!
-//! `ξ1` picks the patch row `k` from the discrete distribution of `M_k`, then `t`
-//! from the linear density `(1 - t) R_k + t R_{k+1}`. Given `t`, the conditional
-//! `B(u, v) / m(v)` is piecewise linear in u with cumulative integral
-//! `C(U_i) = (1 - t) C_k[i] + t C_{k+1}[i]`, where `C_k` is node row `k`'s cumulative
-//! trapezoid integral; `ξ0` finds the segment by a binary search over that blend
-//! (evaluated on the fly, so nothing per-`t` is stored) and then `u` inside it from
-//! the linear density between the blended node values.
+//! which is `B / I` up to the CDFs' 2⁻³² rounding of `P_ik` (the rounding
+//! [`Distribution2D`] documents): that is the pdf reported, so it is the exact
+//! density of the sampler and integrates to 1 exactly. Patch choice and placement
+//! are each a few operations, with no search over a row: about the cost of the
+//! piecewise-constant sampler plus two square roots. (The map is continuous
+//! within each patch; across a patch edge it jumps, as every patch- or cell-based
+//! sampler does.)
 //!
-//! A linear density `a (1 - x) + b x` on `[0, 1]` is sampled in closed form,
-//! `x = ξ (a + b) / (a + √((1 - ξ) a² + ξ b²))`: the root of the quadratic CDF written
-//! without cancellation, exact when `a = b` (x = ξ) and when `a = 0` (x = √ξ).
-
-use crate::distribution::{sanitize, Sample2D, ONE_MINUS_EPSILON};
+use crate::distribution::{
+    sanitize, CellSample, Distribution2D, Sample2D, ONE_MINUS_EPSILON, STAGED_BLOCK,
+};
 use crate::error::{Error, Result};
 
 /// The largest `f64` below 1.
 const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// A piecewise-bilinear density on `[0, 1]²` over a rectilinear node grid, sampled
-/// by inverting its marginal (v) and conditional (u) CDFs.
+/// by picking a patch and then a point in it (see the module docs).
 ///
 /// Guarantees: a point where the bilinear function is 0 is never returned (up to a
-/// set of measure zero: a sample can land exactly on a zero node row when `ξ1`
-/// equals a CDF breakpoint, and then reports pdf 0); `pdf(sample_continuous(ξ).uv)`
-/// equals the returned pdf; `invert(sample_continuous(ξ).uv) ≈ ξ`.
+/// set of measure zero: a sample can land exactly on a zero edge of its patch,
+/// and then reports pdf 0); `pdf(sample_continuous(ξ).uv)` equals the returned
+/// pdf; `invert(sample_continuous(ξ).uv) ≈ ξ`.
 ///
-/// Cost: sampling is a binary search over the patch rows and one over the nodes of
-/// a row (each probe blends two stored rows), plus two square roots; `pdf` and
-/// `invert` locate the patch through a guide table (O(1) for evenly spread nodes,
-/// O(log n) at worst). Memory: 8 bytes per node (the value and its row's
-/// normalised cumulative integral, both `f32`) plus 16 per node row and 12 per node
+/// Cost: sampling is two guide-table lookups with short scans plus two square
+/// roots, O(1) expected; `pdf` and `invert` locate the patch through a guide table
+/// on the node positions (O(1) for evenly spread nodes, O(log n) at worst) and read
+/// its four corners and its two CDF widths. Memory: 4 bytes per node for the
+/// values plus the patch distribution's 5-6 bytes per patch, and 12 per node
 /// position.
 ///
 /// ```
@@ -68,17 +73,17 @@ pub struct BilinearDistribution2D {
     /// Lookup guides for the node positions ([`guide`]).
     u_guide: Vec<u32>,
     v_guide: Vec<u32>,
+    /// `n` when an axis's nodes are the texel-centre layout `0, (j + ½)/n, 1`
+    /// ([`centred_cells`]), whose patches are found with one multiplication;
+    /// else 0.
+    u_cells: f64,
+    v_cells: f64,
     /// `f[k * mu + i]`, sanitised.
     values: Vec<f32>,
-    /// Node row `k`'s cumulative trapezoid integral divided by `R_k`, at
-    /// `[k * mu .. (k + 1) * mu]`: 0 at the first node, exactly 1 at the last (a
-    /// zero row holds the node positions instead; it is never weighted).
-    cumulative: Vec<f32>,
-    /// `R_k = ∫ B(u, V_k) du`.
-    row_integral: Vec<f64>,
-    /// The marginal CDF over patch rows: `mv` entries from 0 to exactly 1.
-    row_cdf: Vec<f64>,
-    /// `I = ∫∫ B du dv`.
+    /// The patches' masses `M_ik` as a piecewise-constant distribution over the
+    /// `(mu - 1) × (mv - 1)` patch grid: it picks the patch.
+    patches: Distribution2D,
+    /// `I = ∫∫ B du dv = Σ M_ik`.
     integral: f64,
 }
 
@@ -116,58 +121,46 @@ impl BilinearDistribution2D {
             )));
         }
         let values: Vec<f32> = values.iter().map(|&x| sanitize(x)).collect();
-        let mut cumulative = vec![0.0f32; mu * mv];
-        let mut row_integral = vec![0.0f64; mv];
-        let mut sums = vec![0.0f64; mu];
-        for ((row, cdf), integral) in values
-            .chunks(mu)
-            .zip(cumulative.chunks_mut(mu))
-            .zip(row_integral.iter_mut())
-        {
-            // Trapezoids are exact for a function linear between nodes.
-            let mut running = 0.0f64;
-            for i in 0..mu - 1 {
-                let width = u_nodes[i + 1] - u_nodes[i];
-                running += width * 0.5 * (row[i] as f64 + row[i + 1] as f64);
-                sums[i + 1] = running;
-            }
-            *integral = running;
-            if running > 0.0 {
-                for (c, &s) in cdf.iter_mut().zip(&sums) {
-                    *c = (s / running) as f32;
+        // Masses relative to the mean patch area, so that they stay well inside
+        // f32's range for any node spacing; a positive mass never rounds to 0.
+        let patch_count = ((mu - 1) * (mv - 1)) as f64;
+        let mass = |i: usize, k: usize| -> f64 {
+            let corners = values[k * mu + i] as f64
+                + values[k * mu + i + 1] as f64
+                + values[(k + 1) * mu + i] as f64
+                + values[(k + 1) * mu + i + 1] as f64;
+            let area = (u_nodes[i + 1] - u_nodes[i]) * (v_nodes[k + 1] - v_nodes[k]);
+            area * 0.25 * corners
+        };
+        let (patches, row_sums) = Distribution2D::from_rows_with(
+            mu - 1,
+            mv - 1,
+            || (),
+            |_, k, row| {
+                let mut sum = 0.0f64;
+                for (i, m) in row.iter_mut().enumerate() {
+                    let exact = mass(i, k);
+                    sum += exact;
+                    let relative = (exact * patch_count) as f32;
+                    *m = if exact > 0.0 {
+                        relative.clamp(f32::from_bits(1), f32::MAX)
+                    } else {
+                        0.0
+                    };
                 }
-            } else {
-                for (c, &u) in cdf.iter_mut().zip(u_nodes) {
-                    *c = u as f32;
-                }
-            }
-            cdf[mu - 1] = 1.0;
-        }
-        let mut row_cdf = vec![0.0f64; mv];
-        let mut running = 0.0f64;
-        for k in 0..mv - 1 {
-            let height = v_nodes[k + 1] - v_nodes[k];
-            running += height * 0.5 * (row_integral[k] + row_integral[k + 1]);
-            row_cdf[k + 1] = running;
-        }
-        let integral = running;
-        if integral > 0.0 {
-            for c in &mut row_cdf {
-                *c /= integral;
-            }
-        } else {
-            row_cdf.copy_from_slice(v_nodes);
-        }
-        row_cdf[mv - 1] = 1.0;
+                sum
+            },
+        );
+        let integral: f64 = row_sums.iter().sum();
         Ok(Self {
             u_nodes: u_nodes.to_vec(),
             v_nodes: v_nodes.to_vec(),
             u_guide: guide(u_nodes),
             v_guide: guide(v_nodes),
+            u_cells: centred_cells(u_nodes),
+            v_cells: centred_cells(v_nodes),
             values,
-            cumulative,
-            row_integral,
-            row_cdf,
+            patches,
             integral,
         })
     }
@@ -196,13 +189,11 @@ impl BilinearDistribution2D {
         self.integral
     }
 
-    /// Bytes of sampling data held (values, cumulative integrals, per-row data and
-    /// node positions).
+    /// Bytes of sampling data held (values, the patch distribution and the node
+    /// positions with their guides).
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.values.as_slice())
-            + std::mem::size_of_val(self.cumulative.as_slice())
-            + std::mem::size_of_val(self.row_integral.as_slice())
-            + std::mem::size_of_val(self.row_cdf.as_slice())
+            + self.patches.memory_bytes()
             + std::mem::size_of_val(self.u_nodes.as_slice())
             + std::mem::size_of_val(self.v_nodes.as_slice())
             + std::mem::size_of_val(self.u_guide.as_slice())
@@ -210,134 +201,123 @@ impl BilinearDistribution2D {
     }
 
     /// The patch column holding `u ∈ [0, 1]` ([`patch_of`], in O(1) for evenly
-    /// spread nodes).
-    #[inline]
+    /// spread nodes and with one multiplication for texel centres).
+    #[inline(always)]
     fn patch_u(&self, u: f64) -> usize {
-        guided_patch(&self.u_nodes, &self.u_guide, u)
+        locate_patch(&self.u_nodes, &self.u_guide, self.u_cells, u)
     }
 
     /// The patch row holding `v ∈ [0, 1]`.
-    #[inline]
+    #[inline(always)]
     fn patch_v(&self, v: f64) -> usize {
-        guided_patch(&self.v_nodes, &self.v_guide, v)
+        locate_patch(&self.v_nodes, &self.v_guide, self.v_cells, v)
     }
 
-    #[inline]
-    fn mu(&self) -> usize {
-        self.u_nodes.len()
+    /// The corners of patch `[i, k]`: `[f_00, f_10, f_01, f_11]` (first index u).
+    #[inline(always)]
+    fn corners(&self, i: usize, k: usize) -> [f64; 4] {
+        let mu = self.u_nodes.len();
+        let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
+        [
+            self.values[top] as f64,
+            self.values[top + 1] as f64,
+            self.values[bottom] as f64,
+            self.values[bottom + 1] as f64,
+        ]
     }
 
-    /// The blended cumulative integral `(1 - t) R_k ĉ_k[i] + t R_{k+1} ĉ_{k+1}[i]`
-    /// with the weights `w = [(1 - t) R_k, t R_{k+1}]`.
-    #[inline]
-    fn blended_cumulative(&self, k: usize, w: [f64; 2], i: usize) -> f64 {
-        let mu = self.mu();
-        w[0] * self.cumulative[k * mu + i] as f64 + w[1] * self.cumulative[(k + 1) * mu + i] as f64
-    }
-
-    /// The node values of column `i` blended between node rows `k` and `k + 1`.
-    #[inline]
-    fn blended_value(&self, k: usize, t: f64, i: usize) -> f64 {
-        let mu = self.mu();
-        let (a, b) = (
-            self.values[k * mu + i] as f64,
-            self.values[(k + 1) * mu + i] as f64,
-        );
-        (1.0 - t) * a + t * b
-    }
-
-    /// `B(u, v) / I` in patch `[i, k]`, 0 for a zero function.
-    #[inline]
+    /// The density at `(u, v)` in patch `[i, k]`: `P_ik · B(u, v) / M_ik`, 0 for a
+    /// patch of no mass. With the patch's sides `Δu, Δv` and the distances of the
+    /// point to them, `Δu Δv B` is the corners weighted by the opposite distances
+    /// and `M_ik = Δu Δv Σf / 4`, so the density is one division:
+    /// `4 P_ik (Δu Δv B) / ((Δu Δv)² Σf)`.
+    #[inline(always)]
     fn patch_pdf(&self, i: usize, k: usize, u: f64, v: f64) -> f32 {
-        if self.integral <= 0.0 {
+        let [a, b, c, d] = self.corners(i, k);
+        let (u0, u1) = (self.u_nodes[i], self.u_nodes[i + 1]);
+        let (v0, v1) = (self.v_nodes[k], self.v_nodes[k + 1]);
+        let (left, right) = ((u - u0).max(0.0), (u1 - u).max(0.0));
+        let (top, bottom) = ((v - v0).max(0.0), (v1 - v).max(0.0));
+        let weighted = bottom * (right * a + left * b) + top * (right * c + left * d);
+        let area = (u1 - u0) * (v1 - v0);
+        let denominator = area * area * (a + b + c + d);
+        if !(denominator > 0.0) {
             return 0.0;
         }
-        let tu = local(u, self.u_nodes[i], self.u_nodes[i + 1]);
-        let tv = local(v, self.v_nodes[k], self.v_nodes[k + 1]);
-        let top = lerp(
-            tu,
-            self.values[k * self.mu() + i] as f64,
-            self.values[k * self.mu() + i + 1] as f64,
-        );
-        let bottom = lerp(
-            tu,
-            self.values[(k + 1) * self.mu() + i] as f64,
-            self.values[(k + 1) * self.mu() + i + 1] as f64,
-        );
-        (lerp(tv, top, bottom) / self.integral) as f32
+        (4.0 * self.patches.cell_probability(i, k) * weighted / denominator) as f32
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square):
-    /// the bilinear interpolation of the patch's corners divided by `I`.
+    /// the bilinear interpolation of the patch's corners over the patch's mass,
+    /// times the probability of picking the patch.
     #[inline]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
         let (u, v) = (unit_closed(uv[0]), unit_closed(uv[1]));
         self.patch_pdf(self.patch_u(u), self.patch_v(v), u, v)
     }
 
-    /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1` picks the
-    /// patch row and `v` in it, `ξ0` the segment of the conditional in u and `u` in
-    /// it (see the module docs). The returned cell is the patch `[i, k]`, the one
-    /// [`Self::pdf`] finds for the returned point. Components outside `[0, 1)` or
-    /// NaN are clamped.
+    /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`]: the patch from
+    /// the patch distribution, then the point in it from the offsets (see the
+    /// module docs). The returned cell is the patch `[i, k]`, the one [`Self::pdf`]
+    /// finds for the returned point. Components outside `[0, 1)` or NaN are
+    /// clamped.
     #[inline]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        let (xi0, xi1) = (unit_open(xi[0]), unit_open(xi[1]));
         if self.integral <= 0.0 {
-            let uv = [
-                (xi0 as f32).min(ONE_MINUS_EPSILON),
-                (xi1 as f32).min(ONE_MINUS_EPSILON),
-            ];
-            let (u, v) = (uv[0] as f64, uv[1] as f64);
-            return Sample2D {
-                uv,
-                pdf: 0.0,
-                cell: [self.patch_u(u), self.patch_v(v)],
-            };
+            return self.sample_black(xi);
         }
-        // The patch row, then v inside it from the linear marginal.
-        let k = last_at_most(self.row_cdf.len(), xi1, |j| self.row_cdf[j]);
-        let (lo, hi) = (self.row_cdf[k], self.row_cdf[k + 1]);
-        let xi1 = ((xi1 - lo) / (hi - lo)).clamp(0.0, ONE_MINUS_EPSILON_F64);
-        let t = sample_linear(xi1, self.row_integral[k], self.row_integral[k + 1]);
-        let v = lerp(t, self.v_nodes[k], self.v_nodes[k + 1]);
+        self.place(self.patches.sample_cell(xi))
+    }
 
-        // The segment of the conditional in u at this t, then u inside it.
-        let w = [
-            (1.0 - t) * self.row_integral[k],
-            t * self.row_integral[k + 1],
-        ];
-        let total = w[0] + w[1];
-        let i;
-        let u;
-        if total > 0.0 {
-            let x = xi0 * total;
-            i = last_at_most(self.mu(), x, |j| self.blended_cumulative(k, w, j));
-            let (c0, c1) = (
-                self.blended_cumulative(k, w, i),
-                self.blended_cumulative(k, w, i + 1),
-            );
-            // c1 > c0 by the search, unless `total` is so small that ξ0·total rounds up.
-            let within = if c1 > c0 {
-                ((x - c0) / (c1 - c0)).clamp(0.0, ONE_MINUS_EPSILON_F64)
-            } else {
-                0.0
-            };
-            let s = sample_linear(
-                within,
-                self.blended_value(k, t, i),
-                self.blended_value(k, t, i + 1),
-            );
-            u = lerp(s, self.u_nodes[i], self.u_nodes[i + 1]);
-        } else {
-            // Only on a zero node row hit exactly (t = 0 or 1): a point of pdf 0.
-            u = xi0;
-            i = self.patch_u(u);
+    /// [`Self::sample_continuous`] for a block of `ξ` (at most
+    /// [`STAGED_BLOCK`](crate::distribution::STAGED_BLOCK)), the patches picked
+    /// with overlapping memory accesses; the same results as one at a time.
+    ///
+    /// # Panics
+    /// When the slices differ in length or are longer than `STAGED_BLOCK`.
+    #[inline(always)]
+    pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D]) {
+        if self.integral <= 0.0 {
+            for (o, &x) in out.iter_mut().zip(xi) {
+                *o = self.sample_black(x);
+            }
+            return;
         }
+        let mut cells = [CellSample::default(); STAGED_BLOCK];
+        let cells = &mut cells[..xi.len().min(STAGED_BLOCK)];
+        self.patches.sample_cell_block(xi, cells);
+        for (o, &c) in out.iter_mut().zip(cells.iter()) {
+            *o = self.place(c);
+        }
+    }
+
+    /// The uniform point with pdf 0 that a function with no mass gives for `ξ`.
+    fn sample_black(&self, xi: [f32; 2]) -> Sample2D {
+        let uv = [
+            (unit_open(xi[0]) as f32).min(ONE_MINUS_EPSILON),
+            (unit_open(xi[1]) as f32).min(ONE_MINUS_EPSILON),
+        ];
+        Sample2D {
+            uv,
+            pdf: 0.0,
+            cell: [self.patch_u(uv[0] as f64), self.patch_v(uv[1] as f64)],
+        }
+    }
+
+    /// The point of patch `c.cell` that the offsets `c.offset` give: `y` from the
+    /// linear marginal, then `x` from the linear conditional at `y`.
+    #[inline(always)]
+    fn place(&self, c: CellSample) -> Sample2D {
+        let [i, k] = c.cell;
+        let [a, b, cc, d] = self.corners(i, k);
+        let y = sample_linear(c.offset[1], a + b, cc + d);
+        let x = sample_linear(c.offset[0], lerp(y, a, cc), lerp(y, b, d));
+        let u = lerp(x, self.u_nodes[i], self.u_nodes[i + 1]);
+        let v = lerp(y, self.v_nodes[k], self.v_nodes[k + 1]);
         // The pdf is evaluated at the rounded point in the patch `pdf()` finds for
         // it, so the two agree to the bit.
-        let (u, i) = point_in_patch(&self.u_nodes, &self.u_guide, i, u);
-        let (v, k) = point_in_patch(&self.v_nodes, &self.v_guide, k, v);
+        let (u, i) = point_in_patch(&self.u_nodes, i, u, |x| self.patch_u(x));
+        let (v, k) = point_in_patch(&self.v_nodes, k, v, |x| self.patch_v(x));
         Sample2D {
             uv: [u, v],
             pdf: self.patch_pdf(i, k, u as f64, v as f64),
@@ -352,30 +332,13 @@ impl BilinearDistribution2D {
         if self.integral <= 0.0 {
             return [u as f32, v as f32];
         }
-        let k = self.patch_v(v);
-        let t = local(v, self.v_nodes[k], self.v_nodes[k + 1]);
-        let (r0, r1) = (self.row_integral[k], self.row_integral[k + 1]);
-        let xi1 = lerp(cdf_linear(t, r0, r1), self.row_cdf[k], self.row_cdf[k + 1]);
-
-        let i = self.patch_u(u);
-        let w = [(1.0 - t) * r0, t * r1];
-        let total = w[0] + w[1];
-        let xi0 = if total > 0.0 {
-            let s = local(u, self.u_nodes[i], self.u_nodes[i + 1]);
-            let (c0, c1) = (
-                self.blended_cumulative(k, w, i),
-                self.blended_cumulative(k, w, i + 1),
-            );
-            let within = cdf_linear(
-                s,
-                self.blended_value(k, t, i),
-                self.blended_value(k, t, i + 1),
-            );
-            (c0 + within * (c1 - c0)) / total
-        } else {
-            u
-        };
-        [(xi0 as f32).clamp(0.0, 1.0), (xi1 as f32).clamp(0.0, 1.0)]
+        let (i, k) = (self.patch_u(u), self.patch_v(v));
+        let [a, b, c, d] = self.corners(i, k);
+        let x = local(u, self.u_nodes[i], self.u_nodes[i + 1]);
+        let y = local(v, self.v_nodes[k], self.v_nodes[k + 1]);
+        let r = cdf_linear(y, a + b, c + d);
+        let s = cdf_linear(x, lerp(y, a, c), lerp(y, b, d));
+        self.patches.invert_cell([i, k], [s, r])
     }
 }
 
@@ -428,23 +391,6 @@ fn cdf_linear(x: f64, a: f64, b: f64) -> f64 {
     (x * (a * (2.0 - x) + b * x) / (a + b)).clamp(0.0, 1.0)
 }
 
-/// The last index `j ∈ [0, n - 2]` with `value(j) <= x`, for a non-decreasing
-/// `value` with `value(0) <= x < value(n - 1)`: the segment `[j, j + 1]` holding
-/// `x`, never one of zero width.
-#[inline]
-fn last_at_most(n: usize, x: f64, value: impl Fn(usize) -> f64) -> usize {
-    let (mut lo, mut hi) = (0usize, n - 1);
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        if value(mid) <= x {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    lo
-}
-
 /// The patch of `nodes` holding `x ∈ [0, 1]`: the last `i ≤ n - 2` with
 /// `nodes[i] <= x`.
 #[inline]
@@ -478,7 +424,7 @@ fn guided_patch(nodes: &[f64], guide: &[u32], x: f64) -> usize {
 /// (rounding can carry a point on a patch edge into the neighbour), with the patch
 /// [`patch_of`] finds for it: `i`, unless the patch is narrower than an `f32` step.
 #[inline]
-fn point_in_patch(nodes: &[f64], guide: &[u32], i: usize, x: f64) -> (f32, usize) {
+fn point_in_patch(nodes: &[f64], i: usize, x: f64, patch: impl Fn(f64) -> usize) -> (f32, usize) {
     let last = nodes.len() - 2;
     let mut y = (x as f32).min(ONE_MINUS_EPSILON);
     for _ in 0..4 {
@@ -491,7 +437,37 @@ fn point_in_patch(nodes: &[f64], guide: &[u32], i: usize, x: f64) -> (f32, usize
             return (y, i);
         }
     }
-    (y, guided_patch(nodes, guide, y as f64))
+    (y, patch(y as f64))
+}
+
+/// `n` when `nodes` are `0, (j + ½)/n for j < n, 1` exactly as written here (the
+/// texel-centre layout), else 0.
+fn centred_cells(nodes: &[f64]) -> f64 {
+    let n = nodes.len().saturating_sub(2);
+    let centred = n >= 1
+        && nodes[0] == 0.0
+        && nodes[n + 1] == 1.0
+        && (0..n).all(|j| nodes[j + 1] == (j as f64 + 0.5) / n as f64);
+    if centred {
+        n as f64
+    } else {
+        0.0
+    }
+}
+
+/// [`patch_of`] for `x` that is an `f32` in `[0, 1]`: `⌊x n + ½⌋` for the
+/// texel-centre layout over `cells = n > 0` texels, else through the guide. For
+/// `n < 2²⁸` the two agree exactly: `x n + ½` is exact in `f64`, and an `f32`
+/// that is not a node `(2j + 1) / 2n` is at least `2⁻²⁴ / 2n` (relative) from it,
+/// far more than the node's rounding to `f64`, which so cannot flip a comparison.
+#[inline(always)]
+fn locate_patch(nodes: &[f64], guide: &[u32], cells: f64, x: f64) -> usize {
+    if cells > 0.0 {
+        // x ∈ [0, 1], so the floor is in [0, n] (n at x = 1, the last patch).
+        (x * cells + 0.5) as usize
+    } else {
+        guided_patch(nodes, guide, x)
+    }
 }
 
 /// `(x - a) / (b - a)` clamped to `[0, 1]`.
@@ -592,7 +568,7 @@ mod tests {
         let (u, v) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
         let tu = local(u, d.u_nodes[i], d.u_nodes[i + 1]);
         let tv = local(v, d.v_nodes[k], d.v_nodes[k + 1]);
-        let mu = d.mu();
+        let mu = d.u_nodes.len();
         let at = |kk: usize, ii: usize| d.values[kk * mu + ii] as f64;
         let b = lerp(
             tv,
@@ -630,7 +606,7 @@ mod tests {
         seed: u64,
     ) -> f64 {
         let rects = bins(d);
-        let nbu = 2 * (d.mu() - 1);
+        let nbu = 2 * (d.u_nodes.len() - 1);
         let mut counts = vec![0u64; rects.len()];
         for k in 0..n {
             let s = d.sample_continuous(xi_2d(seed, k));
@@ -712,6 +688,44 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The texel-centre shortcut finds the patch the node comparisons find, for
+    /// every f32 near each node (the nodes themselves, the f32 steps either side)
+    /// and for random f32, on widths that are and are not powers of two.
+    #[test]
+    fn centred_lookup_matches_the_node_comparisons() {
+        let mut rng = SplitMix64::new(41);
+        for n in [1usize, 2, 3, 7, 96, 1000, 1024, 4097, 16384] {
+            let mut nodes = vec![0.0];
+            nodes.extend((0..n).map(|j| (j as f64 + 0.5) / n as f64));
+            nodes.push(1.0);
+            let cells = centred_cells(&nodes);
+            assert_eq!(cells, n as f64);
+            let g = guide(&nodes);
+            let mut probes: Vec<f32> = vec![0.0, 1.0, ONE_MINUS_EPSILON];
+            for &x in &nodes {
+                let x = x as f32;
+                probes.extend([
+                    x,
+                    x.next_up(),
+                    x.next_down().max(0.0),
+                    x.next_up().next_up(),
+                ]);
+            }
+            probes.extend((0..20_000).map(|_| rng.next_f32()));
+            for x in probes {
+                let x = (x as f64).clamp(0.0, 1.0);
+                assert_eq!(
+                    locate_patch(&nodes, &g, cells, x),
+                    patch_of(&nodes, x),
+                    "n {n} x {x}"
+                );
+            }
+        }
+        let uneven = [0.0, 0.3, 1.0];
+        assert_eq!(centred_cells(&uneven), 0.0);
+        assert_eq!(centred_cells(&[0.0, 1.0]), 0.0);
     }
 
     #[test]

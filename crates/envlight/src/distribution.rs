@@ -552,6 +552,17 @@ pub struct Sample2D {
     pub cell: [usize; 2],
 }
 
+/// A cell picked by a [`Distribution2D`], before a point is placed in it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct CellSample {
+    /// `[iu, iv]`.
+    pub cell: [usize; 2],
+    /// Where `ξ` fell within the cell's CDF segments, `[0, 1)` each.
+    pub offset: [f64; 2],
+    /// The cell's widths in CDF units, `[width_u, width_v]`.
+    pub widths: [u32; 2],
+}
+
 impl Distribution2D {
     /// Builds the distribution of `f`, given row-major with `nu` values per row.
     /// Rows are built in parallel. Negative, NaN and infinite values count as 0.
@@ -757,41 +768,134 @@ impl Distribution2D {
     }
 
     /// [`Self::sample_continuous_hinted`] for a block of `ξ` (at most
-    /// [`STAGED_BLOCK`]), in three passes over the block: the marginal (whose data
-    /// is small and stays cached) and the address of each row's guide entry, then
-    /// the guide entries and the address of each CDF segment, then the scans and
-    /// placements. Each pass only asks for the memory the next one reads, so on a
-    /// map larger than the caches a block's cache misses overlap instead of
-    /// following each other sample by sample; the results are the same as one
-    /// sample at a time.
+    /// [`STAGED_BLOCK`]), staged so that the block's cache misses overlap
+    /// ([`Self::staged_block`]); the results are the same as one sample at a time.
     ///
     /// # Panics
     /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
     #[inline(always)]
     pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D], hint: impl Fn([f32; 2])) {
+        self.staged_block(
+            xi,
+            out,
+            |marginal, x| {
+                let (iv, v, wv) = marginal.sample_point(x, |_| {});
+                (iv, (v, wv))
+            },
+            |c, &(v, _)| hint([self.cell_centre_u(c), v]),
+            |row, c, fixed, t, iv, &(v, wv)| {
+                let (iu, u, wu) = row.point_from(c, fixed, t);
+                Sample2D {
+                    uv: [u, v],
+                    pdf: self.pdf_of_widths(wu, wv),
+                    cell: [iu, iv],
+                }
+            },
+        );
+    }
+
+    /// The cell that [`Self::sample_continuous`] picks for `ξ`, with the offsets of
+    /// `ξ` within the cell's CDF segments (each in `[0, 1)`, free for placing a
+    /// point in the cell by some other rule) and the cell's fixed-point widths.
+    #[inline(always)]
+    pub(crate) fn sample_cell(&self, xi: [f32; 2]) -> CellSample {
+        let (iv, fv, wv) = self.marginal.view().sample(xi[1]);
+        let (iu, fu, wu) = self.row(iv).sample(xi[0]);
+        CellSample {
+            cell: [iu, iv],
+            offset: [fu, fv],
+            widths: [wu, wv],
+        }
+    }
+
+    /// [`Self::sample_cell`] for a block of `ξ`, staged like [`Self::sample_block`].
+    #[inline(always)]
+    pub(crate) fn sample_cell_block(&self, xi: &[[f32; 2]], out: &mut [CellSample]) {
+        self.staged_block(
+            xi,
+            out,
+            |marginal, x| {
+                let (iv, fv, wv) = marginal.sample(x);
+                (iv, (fv, wv))
+            },
+            |_, _| {},
+            |row, c, fixed, t, iv, &(fv, wv)| {
+                let (iu, lo, hi) = row.segment(c, fixed);
+                let wu = hi - lo;
+                CellSample {
+                    cell: [iu, iv],
+                    offset: [(t - lo as f64) / wu as f64, fv],
+                    widths: [wu, wv],
+                }
+            },
+        );
+    }
+
+    /// Probability of picking cell `[iu, iv]`: `width_u · width_v / CDF_ONE²`.
+    ///
+    /// # Panics
+    /// When the cell is outside the grid.
+    #[inline(always)]
+    pub(crate) fn cell_probability(&self, iu: usize, iv: usize) -> f64 {
+        let wv = self.marginal.view().width(iv);
+        let wu = self.row(iv).width(iu);
+        (wu as f64 * (1.0 / CDF_ONE as f64)) * (wv as f64 * (1.0 / CDF_ONE as f64))
+    }
+
+    /// The `ξ` that [`Self::sample_cell`] maps to cell `cell` with `offset`: the
+    /// inverse of the choice, whatever rule placed the point in the cell.
+    #[inline]
+    pub(crate) fn invert_cell(&self, cell: [usize; 2], offset: [f64; 2]) -> [f32; 2] {
+        let on = |cdf: GuidedCdf<'_>, o: usize, f: f64| {
+            let t = cdf.cdf[o] as f64 + f.clamp(0.0, 1.0) * cdf.width(o) as f64;
+            ((t / CDF_ONE as f64) as f32).clamp(0.0, 1.0)
+        };
+        [
+            on(self.row(cell[1]), cell[0], offset[0]),
+            on(self.marginal.view(), cell[1], offset[1]),
+        ]
+    }
+
+    /// Samples a block of `ξ` (at most [`STAGED_BLOCK`]) in three passes over the
+    /// block: the marginal (`marginal`, whose data is small and stays cached) and
+    /// the address of each row's guide entry, then the guide entries (each
+    /// candidate cell told to `hint`) and the address of each CDF segment, then the
+    /// scans and results (`finish`). Each pass only asks for the memory the next
+    /// one reads, so on a map larger than the caches a block's cache misses
+    /// overlap instead of following each other sample by sample.
+    ///
+    /// # Panics
+    /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
+    #[inline(always)]
+    fn staged_block<M: Copy + Default, R>(
+        &self,
+        xi: &[[f32; 2]],
+        out: &mut [R],
+        marginal: impl Fn(GuidedCdf<'_>, f32) -> (usize, M),
+        hint: impl Fn(usize, &M),
+        finish: impl Fn(GuidedCdf<'_>, usize, u32, f64, usize, &M) -> R,
+    ) {
         assert!(
             xi.len() == out.len() && xi.len() <= STAGED_BLOCK,
             "bad block"
         );
-        /// A sample between passes: its row, `v` and the row's width from the
-        /// marginal, and `ξ0` on the fixed-point scale (`⌊t⌋`, `t`).
+        /// A sample between passes: its row, what `marginal` said of it, and `ξ0`
+        /// on the fixed-point scale (`⌊t⌋`, `t`).
         #[derive(Clone, Copy, Default)]
-        struct InRow {
+        struct InRow<M> {
             iv: usize,
-            v: f32,
-            wv: u32,
+            row: M,
             fixed: u32,
             t: f64,
         }
-        let mut rows = [InRow::default(); STAGED_BLOCK];
+        let mut rows = [InRow::<M>::default(); STAGED_BLOCK];
         for (row, &x) in rows.iter_mut().zip(xi) {
-            let (iv, v, wv) = self.marginal.view().sample_point(x[1], |_| {});
+            let (iv, m) = marginal(self.marginal.view(), x[1]);
             let (fixed, t) = to_fixed(x[0]);
             prefetch_read(self.row(iv).guide_entry(fixed));
             *row = InRow {
                 iv,
-                v,
-                wv,
+                row: m,
                 fixed,
                 t,
             };
@@ -801,15 +905,10 @@ impl Distribution2D {
             let cdf = self.row(row.iv);
             *c = cdf.first_candidate(row.fixed);
             prefetch_read(&cdf.cdf[*c + 1]);
-            hint([self.cell_centre_u(*c), row.v]);
+            hint(*c, &row.row);
         }
         for ((o, row), &c) in out.iter_mut().zip(&rows).zip(&candidates) {
-            let (iu, u, wu) = self.row(row.iv).point_from(c, row.fixed, row.t);
-            *o = Sample2D {
-                uv: [u, row.v],
-                pdf: self.pdf_of_widths(wu, row.wv),
-                cell: [iu, row.iv],
-            };
+            *o = finish(self.row(row.iv), c, row.fixed, row.t, row.iv, &row.row);
         }
     }
 

@@ -7,7 +7,7 @@ use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
 use crate::distribution::{cell_indices, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, EQUIRECT_JACOBIAN};
-use crate::math::Vec3;
+use crate::math::{is_positive_finite, Vec3};
 use rayon::prelude::*;
 
 impl EnvironmentLight {
@@ -18,13 +18,24 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
-        let one_by_one = |sample: &(dyn Fn([f32; 2]) -> Sample2D + Sync),
-                          xi: &[[f32; 2]],
-                          out: &mut [Sample2D]| {
-            for (o, &x) in out.iter_mut().zip(xi) {
-                *o = sample(x);
-            }
-        };
+        self.run_batch(xi, out, Self::sample_chunk, Self::sample_chunk_avx2);
+    }
+
+    /// [`Self::sample_chunk`] compiled for AVX2 (see [`wide_vectors`]).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    fn sample_chunk_avx2(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
+        self.sample_chunk(xi, out)
+    }
+
+    /// [`Self::sample_batch`] on one chunk, on the current thread.
+    #[inline(always)]
+    fn sample_chunk(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
+        let one_by_one =
+            |sample: &dyn Fn([f32; 2]) -> Sample2D, xi: &[[f32; 2]], out: &mut [Sample2D]| {
+                for (o, &x) in out.iter_mut().zip(xi) {
+                    *o = sample(x);
+                }
+            };
         match &self.planar {
             Planar::Inversion(d) => self.sample_blocks(xi, out, false, |xi, out| {
                 d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1]))
@@ -39,9 +50,9 @@ impl EnvironmentLight {
             Planar::Hierarchical(d) => self.sample_blocks(xi, out, false, |xi, out| {
                 one_by_one(&|x| d.sample_continuous(x), xi, out)
             }),
-            Planar::Bilinear(d) => self.sample_blocks(xi, out, true, |xi, out| {
-                one_by_one(&|x| d.sample_continuous(x), xi, out)
-            }),
+            Planar::Bilinear(d) => {
+                self.sample_blocks(xi, out, true, |xi, out| d.sample_block(xi, out))
+            }
         }
     }
 
@@ -60,16 +71,45 @@ impl EnvironmentLight {
         continuous_density: bool,
         planar_block: impl Fn(&[[f32; 2]], &mut [Sample2D]) + Sync,
     ) {
-        batch_chunks(xi, out, |xi, out| {
-            let mut planar = [Sample2D::default(); STAGED_BLOCK];
-            for (xi, out) in xi.chunks(STAGED_BLOCK).zip(out.chunks_mut(STAGED_BLOCK)) {
-                let planar = &mut planar[..xi.len()];
-                planar_block(xi, planar);
+        let mut planar = [Sample2D::default(); STAGED_BLOCK];
+        for (xi, out) in xi.chunks(STAGED_BLOCK).zip(out.chunks_mut(STAGED_BLOCK)) {
+            let planar = &mut planar[..xi.len()];
+            planar_block(xi, planar);
+            if continuous_density {
+                self.finish_continuous_block(planar, out);
+            } else {
                 for (o, &p) in out.iter_mut().zip(planar.iter()) {
-                    *o = self.finish_sample(p, continuous_density);
+                    *o = self.finish_sample(p, false);
                 }
             }
-        });
+        }
+    }
+
+    /// [`Self::finish_sample`] of a block of samples of a continuous density: the
+    /// directions first, then their pdfs together, in vector lanes, as
+    /// [`Self::pdf_batch`] computes them (so bit for bit [`Self::pdf`]).
+    #[inline(always)]
+    fn finish_continuous_block(&self, planar: &[Sample2D], out: &mut [Option<LightSample>]) {
+        let n = planar.len();
+        let mut directions = [Vec3::new(0.0, 0.0, 1.0); STAGED_BLOCK];
+        let mut jacobians = [0.0f32; STAGED_BLOCK];
+        for ((d, j), p) in directions.iter_mut().zip(&mut jacobians).zip(planar) {
+            let (local, jacobian) = self.options.mapping.to_direction(p.uv);
+            (*d, *j) = (self.to_world(local), jacobian);
+        }
+        let mut pdfs = [0.0f32; STAGED_BLOCK];
+        self.pdf_chunk(&directions[..n], &mut pdfs[..n]);
+        for (k, (o, p)) in out.iter_mut().zip(planar).enumerate() {
+            let pdf = pdfs[k];
+            *o = (p.pdf != 0.0 && jacobians[k] > 0.0 && is_positive_finite(pdf)).then(|| {
+                LightSample {
+                    direction: directions[k],
+                    pdf,
+                    radiance: self.lookup(p.uv),
+                    uv: p.uv,
+                }
+            });
+        }
     }
 
     /// [`Self::pdf`] for every direction in `directions`, in parallel, bit for bit
@@ -84,15 +124,15 @@ impl EnvironmentLight {
         self.run_batch(directions, out, Self::pdf_chunk, Self::pdf_chunk_avx2);
     }
 
-    /// Hands matching chunks of `directions` and `out` to `kernel`, in parallel,
+    /// Hands matching chunks of `directions` (or samples) and `out` to `kernel`, in parallel,
     /// or to `wide_kernel` (the same code compiled for AVX2) where the CPU has
     /// AVX2 (see [`wide_vectors`]).
-    fn run_batch<O: Send>(
+    fn run_batch<I: Sync, O: Send>(
         &self,
-        directions: &[Vec3],
+        directions: &[I],
         out: &mut [O],
-        kernel: fn(&Self, &[Vec3], &mut [O]),
-        wide_kernel: unsafe fn(&Self, &[Vec3], &mut [O]),
+        kernel: fn(&Self, &[I], &mut [O]),
+        wide_kernel: unsafe fn(&Self, &[I], &mut [O]),
     ) {
         let wide = wide_vectors();
         batch_chunks(directions, out, |dirs, out| {

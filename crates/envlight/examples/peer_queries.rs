@@ -1,0 +1,122 @@
+//! The Rust side of `benches/peers/mitsuba_peer.py`, without Python: the same
+//! synthetic maps (a sky gradient plus a 1° sun holding ~91% of the power), the
+//! batch calls on one thread, 2²⁰ directions per query, best of several rounds, ns
+//! per direction for each density. For iterating on the batch kernels between peer
+//! runs; the peer table itself comes from the Python script.
+//!
+//! `RAYON_NUM_THREADS=1 cargo run --release --example peer_queries -- [WIDTH ...]`
+//! (1024 2048 4096 by default).
+
+use envlight::light::Density;
+use envlight::{EnvImage, EnvironmentLight, LightOptions, LightSample, Vec3};
+use std::f64::consts::PI;
+use std::time::Instant;
+
+const N: usize = 1 << 20;
+const ROUNDS: usize = 7;
+
+/// The peer script's map: `cos θ` sky (at least 0.05) tinted (0.4, 0.6, 1.0), and
+/// a sun of 1° radius at θ = 60°, φ = 130° ten times as bright in total.
+fn synthetic(w: usize, h: usize) -> EnvImage {
+    let dir = |x: usize, y: usize| {
+        let theta = PI * (y as f64 + 0.5) / h as f64;
+        let phi = 2.0 * PI * (x as f64 + 0.5) / w as f64;
+        (
+            theta,
+            [
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ],
+        )
+    };
+    let (t0, p0) = (60f64.to_radians(), 130f64.to_radians());
+    let sun = [t0.sin() * p0.cos(), t0.sin() * p0.sin(), t0.cos()];
+    let cos_radius = 1f64.to_radians().cos();
+    let inside = |x, y| {
+        let (_, d) = dir(x, y);
+        d[0] * sun[0] + d[1] * sun[1] + d[2] * sun[2] > cos_radius
+    };
+    let sky = |theta: f64| theta.cos().max(0.05);
+    let (mut sky_power, mut sun_area) = (0.0, 0.0);
+    let texel = (2.0 * PI / w as f64) * (PI / h as f64);
+    for y in 0..h {
+        for x in 0..w {
+            let (theta, _) = dir(x, y);
+            let dw = texel * theta.sin();
+            sky_power += sky(theta) * (0.4 + 0.6 + 1.0) / 3.0 * dw;
+            if inside(x, y) {
+                sun_area += dw;
+            }
+        }
+    }
+    let sun_value = (10.0 * sky_power / sun_area) as f32;
+    EnvImage::from_fn(w, h, |x, y| {
+        if inside(x, y) {
+            [sun_value; 3]
+        } else {
+            let s = sky(dir(x, y).0) as f32;
+            [0.4 * s, 0.6 * s, s]
+        }
+    })
+    .expect("a valid map")
+}
+
+/// Best and worst of `ROUNDS` runs of `f`, in ns per direction.
+fn timed(mut f: impl FnMut()) -> (f64, f64) {
+    let mut times = Vec::new();
+    for _ in 0..ROUNDS {
+        let start = Instant::now();
+        f();
+        times.push(start.elapsed().as_secs_f64() * 1e9 / N as f64);
+    }
+    let best = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let worst = times.iter().copied().fold(0.0, f64::max);
+    (best, worst)
+}
+
+fn main() {
+    let mut widths: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|s| s.parse().ok())
+        .collect();
+    if widths.is_empty() {
+        widths = vec![1024, 2048, 4096];
+    }
+    println!("{N} directions per query, best of {ROUNDS} [worst]; ns per direction");
+    println!("| density | map | build ms | sample | pdf | radiance |");
+    println!("|---|---|---|---|---|---|");
+    let mut rng = envlight::rng::SplitMix64::new(1);
+    let xi: Vec<[f32; 2]> = (0..N).map(|_| [rng.next_f32(), rng.next_f32()]).collect();
+    for w in widths {
+        let image = synthetic(w, w / 2);
+        for density in [Density::PiecewiseConstant, Density::PiecewiseBilinear] {
+            let options = LightOptions {
+                density,
+                ..Default::default()
+            };
+            let start = Instant::now();
+            let light = EnvironmentLight::new(image.clone(), options).expect("a light");
+            let build = start.elapsed().as_secs_f64() * 1e3;
+            let mut samples: Vec<Option<LightSample>> = vec![None; N];
+            let sample = timed(|| light.sample_batch(&xi, &mut samples));
+            let dirs: Vec<Vec3> = samples
+                .iter()
+                .map(|s| s.map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction))
+                .collect();
+            let mut pdfs = vec![0.0f32; N];
+            let pdf = timed(|| light.pdf_batch(&dirs, &mut pdfs));
+            let mut radiance = vec![[0.0f32; 3]; N];
+            let rad = timed(|| light.radiance_batch(&dirs, &mut radiance));
+            let cell = |(best, worst): (f64, f64)| format!("{best:.1} [{worst:.1}]");
+            println!(
+                "| {} | {w}×{} | {build:.1} | {} | {} | {} |",
+                density.name(),
+                w / 2,
+                cell(sample),
+                cell(pdf),
+                cell(rad)
+            );
+        }
+    }
+}
