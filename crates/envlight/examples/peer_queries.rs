@@ -62,17 +62,30 @@ fn synthetic(w: usize, h: usize) -> EnvImage {
     .expect("a valid map")
 }
 
-/// Best and worst of `ROUNDS` runs of `f`, in ns per direction.
-fn timed(mut f: impl FnMut()) -> (f64, f64) {
-    let mut times = Vec::new();
+/// ns per direction of each of `runs`, over `ROUNDS` rounds that each time every
+/// run once, in turn (so all see the same machine noise): the best of each and,
+/// for each run, the median of its ratio to the first run in the same round.
+fn timed_together(runs: &mut [&mut dyn FnMut()]) -> Vec<(f64, f64)> {
+    let mut times = vec![Vec::new(); runs.len()];
     for _ in 0..ROUNDS {
-        let start = Instant::now();
-        f();
-        times.push(start.elapsed().as_secs_f64() * 1e9 / N as f64);
+        for (run, t) in runs.iter_mut().zip(&mut times) {
+            let start = Instant::now();
+            run();
+            t.push(start.elapsed().as_secs_f64() * 1e9 / N as f64);
+        }
     }
-    let best = times.iter().copied().fold(f64::INFINITY, f64::min);
-    let worst = times.iter().copied().fold(0.0, f64::max);
-    (best, worst)
+    let median = |mut x: Vec<f64>| {
+        x.sort_by(f64::total_cmp);
+        x[x.len() / 2]
+    };
+    times
+        .iter()
+        .map(|t| {
+            let best = t.iter().copied().fold(f64::INFINITY, f64::min);
+            let ratios = t.iter().zip(&times[0]).map(|(a, b)| a / b).collect();
+            (best, median(ratios))
+        })
+        .collect()
 }
 
 fn main() {
@@ -83,39 +96,71 @@ fn main() {
     if widths.is_empty() {
         widths = vec![1024, 2048, 4096];
     }
-    println!("{N} directions per query, best of {ROUNDS} [worst]; ns per direction");
+    println!("{N} directions per query, best of {ROUNDS} rounds; ns per direction");
+    println!("(in brackets: the median over rounds of the time / piecewise-constant's)");
     println!("| density | map | build ms | sample | pdf | radiance |");
     println!("|---|---|---|---|---|---|");
     let mut rng = envlight::rng::SplitMix64::new(1);
     let xi: Vec<[f32; 2]> = (0..N).map(|_| [rng.next_f32(), rng.next_f32()]).collect();
+    let densities = [Density::PiecewiseConstant, Density::PiecewiseBilinear];
     for w in widths {
         let image = synthetic(w, w / 2);
-        for density in [Density::PiecewiseConstant, Density::PiecewiseBilinear] {
-            let options = LightOptions {
-                density,
-                ..Default::default()
-            };
-            let start = Instant::now();
-            let light = EnvironmentLight::new(image.clone(), options).expect("a light");
-            let build = start.elapsed().as_secs_f64() * 1e3;
-            let mut samples: Vec<Option<LightSample>> = vec![None; N];
-            let sample = timed(|| light.sample_batch(&xi, &mut samples));
-            let dirs: Vec<Vec3> = samples
-                .iter()
-                .map(|s| s.map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction))
-                .collect();
-            let mut pdfs = vec![0.0f32; N];
-            let pdf = timed(|| light.pdf_batch(&dirs, &mut pdfs));
-            let mut radiance = vec![[0.0f32; 3]; N];
-            let rad = timed(|| light.radiance_batch(&dirs, &mut radiance));
-            let cell = |(best, worst): (f64, f64)| format!("{best:.1} [{worst:.1}]");
+        let mut builds = Vec::new();
+        let lights: Vec<EnvironmentLight> = densities
+            .iter()
+            .map(|&density| {
+                let options = LightOptions {
+                    density,
+                    ..Default::default()
+                };
+                let start = Instant::now();
+                let light = EnvironmentLight::new(image.clone(), options).expect("a light");
+                builds.push(start.elapsed().as_secs_f64() * 1e3);
+                light
+            })
+            .collect();
+        let mut samples: Vec<Vec<Option<LightSample>>> = vec![vec![None; N]; lights.len()];
+        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
+        for (light, out) in lights.iter().zip(samples.iter_mut()) {
+            let xi = &xi;
+            runs.push(Box::new(move || light.sample_batch(xi, out)));
+        }
+        let sample =
+            timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        drop(runs);
+        // Each density's own samples are its pdf and radiance queries.
+        let dirs: Vec<Vec<Vec3>> = samples
+            .iter()
+            .map(|s| {
+                s.iter()
+                    .map(|s| s.map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction))
+                    .collect()
+            })
+            .collect();
+        let mut pdfs = vec![vec![0.0f32; N]; lights.len()];
+        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
+        for ((light, out), d) in lights.iter().zip(pdfs.iter_mut()).zip(&dirs) {
+            runs.push(Box::new(move || light.pdf_batch(d, out)));
+        }
+        let pdf = timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        drop(runs);
+        let mut radiance = vec![vec![[0.0f32; 3]; N]; lights.len()];
+        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
+        for ((light, out), d) in lights.iter().zip(radiance.iter_mut()).zip(&dirs) {
+            runs.push(Box::new(move || light.radiance_batch(d, out)));
+        }
+        let rad = timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        drop(runs);
+        let cell = |(best, ratio): (f64, f64)| format!("{best:.1} [{ratio:.2}×]");
+        for (k, density) in densities.iter().enumerate() {
             println!(
-                "| {} | {w}×{} | {build:.1} | {} | {} | {} |",
+                "| {} | {w}×{} | {:.1} | {} | {} | {} |",
                 density.name(),
                 w / 2,
-                cell(sample),
-                cell(pdf),
-                cell(rad)
+                builds[k],
+                cell(sample[k]),
+                cell(pdf[k]),
+                cell(rad[k])
             );
         }
     }

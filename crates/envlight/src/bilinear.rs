@@ -35,9 +35,11 @@
 //! sampler does.)
 //!
 use crate::distribution::{
-    sanitize, CellSample, Distribution2D, Sample2D, ONE_MINUS_EPSILON, STAGED_BLOCK,
+    probability_of_widths, sanitize, CellSample, Distribution2D, Sample2D, ONE_MINUS_EPSILON,
+    STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
+use crate::math::prefetch_ptr;
 
 /// The largest `f64` below 1.
 const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
@@ -217,22 +219,38 @@ impl BilinearDistribution2D {
     #[inline(always)]
     fn corners(&self, i: usize, k: usize) -> [f64; 4] {
         let mu = self.u_nodes.len();
+        assert!(
+            i + 1 < mu && (k + 2) * mu <= self.values.len(),
+            "patch outside the grid"
+        );
         let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
-        [
-            self.values[top] as f64,
-            self.values[top + 1] as f64,
-            self.values[bottom] as f64,
-            self.values[bottom + 1] as f64,
-        ]
+        // SAFETY: bottom + 1 = (k + 1) mu + i + 1 < (k + 2) mu <= values.len().
+        unsafe {
+            [
+                *self.values.get_unchecked(top) as f64,
+                *self.values.get_unchecked(top + 1) as f64,
+                *self.values.get_unchecked(bottom) as f64,
+                *self.values.get_unchecked(bottom + 1) as f64,
+            ]
+        }
     }
 
     /// The density at `(u, v)` in patch `[i, k]`: `P_ik · B(u, v) / M_ik`, 0 for a
-    /// patch of no mass. With the patch's sides `Δu, Δv` and the distances of the
-    /// point to them, `Δu Δv B` is the corners weighted by the opposite distances
-    /// and `M_ik = Δu Δv Σf / 4`, so the density is one division:
-    /// `4 P_ik (Δu Δv B) / ((Δu Δv)² Σf)`.
+    /// patch of no mass.
     #[inline(always)]
     fn patch_pdf(&self, i: usize, k: usize, u: f64, v: f64) -> f32 {
+        self.patch_pdf_given(i, k, u, v, self.patches.cell_probability(i, k))
+    }
+
+    /// [`Self::patch_pdf`] with `P_ik` given. With the patch's sides `Δu, Δv` and
+    /// the distances of the point to them, `Δu Δv B` is the corners weighted by
+    /// the opposite distances and `M_ik = Δu Δv Σf / 4`, so the density is one
+    /// division: `4 P_ik (Δu Δv B) / ((Δu Δv)² Σf)`.
+    ///
+    /// # Panics
+    /// When the patch is outside the grid.
+    #[inline(always)]
+    fn patch_pdf_given(&self, i: usize, k: usize, u: f64, v: f64, probability: f64) -> f32 {
         let [a, b, c, d] = self.corners(i, k);
         let (u0, u1) = (self.u_nodes[i], self.u_nodes[i + 1]);
         let (v0, v1) = (self.v_nodes[k], self.v_nodes[k + 1]);
@@ -244,7 +262,34 @@ impl BilinearDistribution2D {
         if !(denominator > 0.0) {
             return 0.0;
         }
-        (4.0 * self.patches.cell_probability(i, k) * weighted / denominator) as f32
+        (4.0 * probability * weighted / denominator) as f32
+    }
+
+    /// The patch `[i, k]` holding `uv` (clamped onto the square), and the point as
+    /// [`Self::pdf`] reads it: the first half of [`Self::pdf`], for callers that
+    /// fetch the patch's data ahead ([`Self::prefetch_patch`]) before the second
+    /// ([`Self::pdf_in_patch`]).
+    #[inline(always)]
+    pub(crate) fn locate(&self, uv: [f32; 2]) -> ([usize; 2], [f64; 2]) {
+        let (u, v) = (unit_closed(uv[0]), unit_closed(uv[1]));
+        ([self.patch_u(u), self.patch_v(v)], [u, v])
+    }
+
+    /// Starts fetching what [`Self::pdf_in_patch`] of patch `[i, k]` reads: its
+    /// two rows of corners and its CDF entries. A hint; harmless for any patch.
+    #[inline(always)]
+    pub(crate) fn prefetch_patch(&self, [i, k]: [usize; 2]) {
+        let mu = self.u_nodes.len();
+        let top = k.wrapping_mul(mu).wrapping_add(i);
+        prefetch_ptr(self.values.as_ptr().wrapping_add(top));
+        prefetch_ptr(self.values.as_ptr().wrapping_add(top.wrapping_add(mu)));
+        self.patches.prefetch_cell(i, k);
+    }
+
+    /// [`Self::pdf`] from what [`Self::locate`] returned.
+    #[inline(always)]
+    pub(crate) fn pdf_in_patch(&self, [i, k]: [usize; 2], [u, v]: [f64; 2]) -> f32 {
+        self.patch_pdf(i, k, u, v)
     }
 
     /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square):
@@ -252,8 +297,8 @@ impl BilinearDistribution2D {
     /// times the probability of picking the patch.
     #[inline]
     pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        let (u, v) = (unit_closed(uv[0]), unit_closed(uv[1]));
-        self.patch_pdf(self.patch_u(u), self.patch_v(v), u, v)
+        let (patch, point) = self.locate(uv);
+        self.pdf_in_patch(patch, point)
     }
 
     /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`]: the patch from
@@ -272,11 +317,14 @@ impl BilinearDistribution2D {
     /// [`Self::sample_continuous`] for a block of `ξ` (at most
     /// [`STAGED_BLOCK`](crate::distribution::STAGED_BLOCK)), the patches picked
     /// with overlapping memory accesses; the same results as one at a time.
+    /// `hint` hears each patch's first corner before any point is placed, so a
+    /// caller can start fetching what it will read there (such as the texels of
+    /// a radiance lookup).
     ///
     /// # Panics
     /// When the slices differ in length or are longer than `STAGED_BLOCK`.
     #[inline(always)]
-    pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D]) {
+    pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D], hint: impl Fn([f32; 2])) {
         if self.integral <= 0.0 {
             for (o, &x) in out.iter_mut().zip(xi) {
                 *o = self.sample_black(x);
@@ -286,8 +334,34 @@ impl BilinearDistribution2D {
         let mut cells = [CellSample::default(); STAGED_BLOCK];
         let cells = &mut cells[..xi.len().min(STAGED_BLOCK)];
         self.patches.sample_cell_block(xi, cells);
-        for (o, &c) in out.iter_mut().zip(cells.iter()) {
-            *o = self.place(c);
+        // Every patch's corners, and whatever the caller reads near it, start
+        // loading before the first point is placed.
+        for c in cells.iter() {
+            self.prefetch_patch(c.cell);
+            let [i, k] = c.cell;
+            hint([self.u_nodes[i] as f32, self.v_nodes[k] as f32]);
+        }
+        // The corners, then both coordinates in the patch for all lanes at once
+        // (in vector lanes: two square roots and two divisions each), then the
+        // points and pdfs.
+        let mut corners = [[0.0f64; STAGED_BLOCK]; 4];
+        let mut offsets = [[0.0f64; STAGED_BLOCK]; 2];
+        for (j, c) in cells.iter().enumerate() {
+            let q = self.corners(c.cell[0], c.cell[1]);
+            for m in 0..4 {
+                corners[m][j] = q[m];
+            }
+            (offsets[0][j], offsets[1][j]) = (c.offset[0], c.offset[1]);
+        }
+        let [a, b, cc, d] = &corners;
+        let mut local = [[0.0f64; STAGED_BLOCK]; 2];
+        for j in 0..STAGED_BLOCK {
+            let y = sample_linear(offsets[1][j], a[j] + b[j], cc[j] + d[j]);
+            let x = sample_linear(offsets[0][j], lerp(y, a[j], cc[j]), lerp(y, b[j], d[j]));
+            (local[0][j], local[1][j]) = (x, y);
+        }
+        for (j, (o, &c)) in out.iter_mut().zip(cells.iter()).enumerate() {
+            *o = self.point_at(c, [local[0][j], local[1][j]]);
         }
     }
 
@@ -312,16 +386,29 @@ impl BilinearDistribution2D {
         let [a, b, cc, d] = self.corners(i, k);
         let y = sample_linear(c.offset[1], a + b, cc + d);
         let x = sample_linear(c.offset[0], lerp(y, a, cc), lerp(y, b, d));
+        self.point_at(c, [x, y])
+    }
+
+    /// The sample at local coordinates `[x, y]` of patch `c.cell`.
+    #[inline(always)]
+    fn point_at(&self, c: CellSample, [x, y]: [f64; 2]) -> Sample2D {
+        let [i, k] = c.cell;
         let u = lerp(x, self.u_nodes[i], self.u_nodes[i + 1]);
         let v = lerp(y, self.v_nodes[k], self.v_nodes[k + 1]);
         // The pdf is evaluated at the rounded point in the patch `pdf()` finds for
         // it, so the two agree to the bit.
-        let (u, i) = point_in_patch(&self.u_nodes, i, u, |x| self.patch_u(x));
-        let (v, k) = point_in_patch(&self.v_nodes, k, v, |x| self.patch_v(x));
+        let (u, iu) = point_in_patch(&self.u_nodes, i, u, |x| self.patch_u(x));
+        let (v, iv) = point_in_patch(&self.v_nodes, k, v, |x| self.patch_v(x));
+        let pdf = if [iu, iv] == c.cell {
+            let probability = probability_of_widths(c.widths);
+            self.patch_pdf_given(iu, iv, u as f64, v as f64, probability)
+        } else {
+            self.patch_pdf(iu, iv, u as f64, v as f64)
+        };
         Sample2D {
             uv: [u, v],
-            pdf: self.patch_pdf(i, k, u as f64, v as f64),
-            cell: [i, k],
+            pdf,
+            cell: [iu, iv],
         }
     }
 
@@ -367,17 +454,19 @@ fn check_nodes(axis: &str, nodes: &[f64]) -> Result<()> {
 /// Samples `x ∈ [0, 1)` from the density ∝ `a (1 - x) + b x` (`a, b ≥ 0`):
 /// `x = ξ (a + b) / (a + √((1 - ξ) a² + ξ b²))`, the stable root of
 /// `(b - a) x² / 2 + a x = ξ (a + b) / 2`. Uniform when `a = b` (including 0).
-#[inline]
+///
+/// Written with selects and no early return, so that a loop over lanes
+/// vectorizes ([`BilinearDistribution2D::sample_block`]).
+#[inline(always)]
 fn sample_linear(xi: f64, a: f64, b: f64) -> f64 {
-    if a == b {
-        return xi;
-    }
     let denominator = a + ((1.0 - xi) * a * a + xi * b * b).sqrt();
-    if denominator > 0.0 {
-        (xi * (a + b) / denominator).clamp(0.0, ONE_MINUS_EPSILON_F64)
+    let x = (xi * (a + b) / denominator).clamp(0.0, ONE_MINUS_EPSILON_F64);
+    // A zero denominator is a = 0 and ξ b² = 0: the density's zero end.
+    let x = if denominator > 0.0 { x } else { 0.0 };
+    if a == b {
+        xi
     } else {
-        // a = 0 and ξ b² = 0: the density's zero end.
-        0.0
+        x
     }
 }
 

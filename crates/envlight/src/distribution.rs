@@ -552,6 +552,13 @@ pub struct Sample2D {
     pub cell: [usize; 2],
 }
 
+/// The probability of a cell of a [`Distribution2D`] of CDF widths `[wu, wv]`:
+/// `wu wv / CDF_ONE²`.
+#[inline(always)]
+pub(crate) fn probability_of_widths([wu, wv]: [u32; 2]) -> f64 {
+    (wu as f64 * (1.0 / CDF_ONE as f64)) * (wv as f64 * (1.0 / CDF_ONE as f64))
+}
+
 /// A cell picked by a [`Distribution2D`], before a point is placed in it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct CellSample {
@@ -837,9 +844,18 @@ impl Distribution2D {
     /// When the cell is outside the grid.
     #[inline(always)]
     pub(crate) fn cell_probability(&self, iu: usize, iv: usize) -> f64 {
-        let wv = self.marginal.view().width(iv);
-        let wu = self.row(iv).width(iu);
-        (wu as f64 * (1.0 / CDF_ONE as f64)) * (wv as f64 * (1.0 / CDF_ONE as f64))
+        assert!(iu < self.nu && iv < self.nv, "cell outside the grid");
+        let marginal = &self.marginal.cdf;
+        let at = iv * (self.nu + 1) + iu;
+        let cdf = &self.conditional_cdf;
+        // SAFETY: as in `cell_pdf_in_grid`, checked above.
+        let (wu, wv) = unsafe {
+            (
+                cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
+                marginal.get_unchecked(iv + 1) - marginal.get_unchecked(iv),
+            )
+        };
+        probability_of_widths([wu, wv])
     }
 
     /// The `ξ` that [`Self::sample_cell`] maps to cell `cell` with `offset`: the

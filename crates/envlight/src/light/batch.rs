@@ -37,22 +37,40 @@ impl EnvironmentLight {
                 }
             };
         match &self.planar {
-            Planar::Inversion(d) => self.sample_blocks(xi, out, false, |xi, out| {
-                d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1]))
-            }),
-            Planar::Alias(d) => self.sample_blocks(xi, out, false, |xi, out| {
-                one_by_one(
-                    &|x| d.sample_continuous_hinted(x, |uv| self.image.prefetch(uv[0], uv[1])),
-                    xi,
-                    out,
-                )
-            }),
-            Planar::Hierarchical(d) => self.sample_blocks(xi, out, false, |xi, out| {
-                one_by_one(&|x| d.sample_continuous(x), xi, out)
-            }),
-            Planar::Bilinear(d) => {
-                self.sample_blocks(xi, out, true, |xi, out| d.sample_block(xi, out))
-            }
+            Planar::Inversion(d) => self.sample_blocks(
+                xi,
+                out,
+                false,
+                #[inline(always)]
+                |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+            ),
+            Planar::Alias(d) => self.sample_blocks(
+                xi,
+                out,
+                false,
+                #[inline(always)]
+                |xi, out| {
+                    one_by_one(
+                        &|x| d.sample_continuous_hinted(x, |uv| self.image.prefetch(uv[0], uv[1])),
+                        xi,
+                        out,
+                    )
+                },
+            ),
+            Planar::Hierarchical(d) => self.sample_blocks(
+                xi,
+                out,
+                false,
+                #[inline(always)]
+                |xi, out| one_by_one(&|x| d.sample_continuous(x), xi, out),
+            ),
+            Planar::Bilinear(d) => self.sample_blocks(
+                xi,
+                out,
+                true,
+                #[inline(always)]
+                |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+            ),
         }
     }
 
@@ -153,8 +171,8 @@ impl EnvironmentLight {
 
     /// [`Self::pdf_batch`] on one chunk, on the current thread. For the
     /// piecewise-constant samplers the cells of a block are found together too
-    /// ([`cell_indices`]) and fetched a block ahead; the bilinear density reads
-    /// its patches one at a time.
+    /// ([`cell_indices`]) and fetched a block ahead; the bilinear density's
+    /// patches likewise.
     #[inline(always)]
     fn pdf_chunk(&self, dirs: &[Vec3], out: &mut [f32]) {
         match &self.planar {
@@ -182,12 +200,25 @@ impl EnvironmentLight {
             Planar::Bilinear(d) => self.uv_blocks(
                 dirs,
                 out,
-                |block| *block,
                 #[inline(always)]
-                |block: &UvBlock, out| {
+                |block| {
+                    let mut patches = PatchBlock {
+                        patch: [[0; 2]; QUERY_BLOCK],
+                        point: [[0.0; 2]; QUERY_BLOCK],
+                        inv_jacobian: block.inv_jacobian,
+                    };
+                    for i in 0..QUERY_BLOCK {
+                        let (patch, point) = d.locate([block.u[i], block.v[i]]);
+                        d.prefetch_patch(patch);
+                        (patches.patch[i], patches.point[i]) = (patch, point);
+                    }
+                    patches
+                },
+                #[inline(always)]
+                |patches: &PatchBlock, out| {
                     for (i, o) in out.iter_mut().enumerate() {
-                        let uv = [block.u[i], block.v[i]];
-                        *o = solid_angle(d.pdf(uv), block.inv_jacobian[i]);
+                        let planar = d.pdf_in_patch(patches.patch[i], patches.point[i]);
+                        *o = solid_angle(planar, patches.inv_jacobian[i]);
                     }
                 },
             ),
@@ -381,6 +412,14 @@ const QUERY_BLOCK: usize = 16;
 struct UvBlock {
     u: [f32; QUERY_BLOCK],
     v: [f32; QUERY_BLOCK],
+    inv_jacobian: [f32; QUERY_BLOCK],
+}
+
+/// A block's bilinear patches, the points in them and the reciprocal Jacobians,
+/// lane by lane.
+struct PatchBlock {
+    patch: [[usize; 2]; QUERY_BLOCK],
+    point: [[f64; 2]; QUERY_BLOCK],
     inv_jacobian: [f32; QUERY_BLOCK],
 }
 
