@@ -242,27 +242,20 @@ impl BilinearDistribution2D {
         self.patch_pdf_given(i, k, u, v, self.patches.cell_probability(i, k))
     }
 
-    /// [`Self::patch_pdf`] with `P_ik` given. With the patch's sides `Δu, Δv` and
-    /// the distances of the point to them, `Δu Δv B` is the corners weighted by
-    /// the opposite distances and `M_ik = Δu Δv Σf / 4`, so the density is one
-    /// division: `4 P_ik (Δu Δv B) / ((Δu Δv)² Σf)`.
+    /// [`Self::patch_pdf`] with `P_ik` given ([`pdf_from_corners`]).
     ///
     /// # Panics
     /// When the patch is outside the grid.
     #[inline(always)]
     fn patch_pdf_given(&self, i: usize, k: usize, u: f64, v: f64, probability: f64) -> f32 {
         let [a, b, c, d] = self.corners(i, k);
-        let (u0, u1) = (self.u_nodes[i], self.u_nodes[i + 1]);
-        let (v0, v1) = (self.v_nodes[k], self.v_nodes[k + 1]);
-        let (left, right) = ((u - u0).max(0.0), (u1 - u).max(0.0));
-        let (top, bottom) = ((v - v0).max(0.0), (v1 - v).max(0.0));
-        let weighted = bottom * (right * a + left * b) + top * (right * c + left * d);
-        let area = (u1 - u0) * (v1 - v0);
-        let denominator = area * area * (a + b + c + d);
-        if !(denominator > 0.0) {
-            return 0.0;
-        }
-        (4.0 * probability * weighted / denominator) as f32
+        let sides = [
+            self.u_nodes[i],
+            self.u_nodes[i + 1],
+            self.v_nodes[k],
+            self.v_nodes[k + 1],
+        ];
+        pdf_from_corners([a, b, c, d], sides, probability, [u, v])
     }
 
     /// The patch `[i, k]` holding `uv` (clamped onto the square), and the point as
@@ -284,6 +277,34 @@ impl BilinearDistribution2D {
         prefetch_ptr(self.values.as_ptr().wrapping_add(top));
         prefetch_ptr(self.values.as_ptr().wrapping_add(top.wrapping_add(mu)));
         self.patches.prefetch_cell(i, k);
+    }
+
+    /// [`Self::pdf_in_patch`] for a block of patches and points: the patches'
+    /// data gathered lane by lane, then the densities in vector lanes. Bit for bit
+    /// the single calls.
+    #[inline(always)]
+    pub(crate) fn pdf_in_patches<const N: usize>(
+        &self,
+        patches: &[[usize; 2]; N],
+        points: &[[f64; 2]; N],
+        out: &mut [f32; N],
+    ) {
+        let mut corners = [[0.0f64; 4]; N];
+        let mut sides = [[0.0f64; 4]; N];
+        let mut probability = [0.0f64; N];
+        for (j, &[i, k]) in patches.iter().enumerate() {
+            corners[j] = self.corners(i, k);
+            sides[j] = [
+                self.u_nodes[i],
+                self.u_nodes[i + 1],
+                self.v_nodes[k],
+                self.v_nodes[k + 1],
+            ];
+            probability[j] = self.patches.cell_probability(i, k);
+        }
+        for j in 0..N {
+            out[j] = pdf_from_corners(corners[j], sides[j], probability[j], points[j]);
+        }
     }
 
     /// [`Self::pdf`] from what [`Self::locate`] returned.
@@ -426,6 +447,32 @@ impl BilinearDistribution2D {
         let r = cdf_linear(y, a + b, c + d);
         let s = cdf_linear(x, lerp(y, a, c), lerp(y, b, d));
         self.patches.invert_cell([i, k], [s, r])
+    }
+}
+
+/// The density at `[u, v]` in a patch with corners `[f_00, f_10, f_01, f_11]`,
+/// sides `[u0, u1, v0, v1]` and probability `P`: `P · B(u, v) / M`, 0 for a patch
+/// of no mass. With the distances of the point to the sides, `Δu Δv B` is the
+/// corners weighted by the opposite distances and `M = Δu Δv Σf / 4`, so the
+/// density is one division: `4 P (Δu Δv B) / ((Δu Δv)² Σf)`. Selects only, so a
+/// loop over lanes vectorizes.
+#[inline(always)]
+fn pdf_from_corners(
+    [a, b, c, d]: [f64; 4],
+    [u0, u1, v0, v1]: [f64; 4],
+    probability: f64,
+    [u, v]: [f64; 2],
+) -> f32 {
+    let (left, right) = ((u - u0).max(0.0), (u1 - u).max(0.0));
+    let (top, bottom) = ((v - v0).max(0.0), (v1 - v).max(0.0));
+    let weighted = bottom * (right * a + left * b) + top * (right * c + left * d);
+    let area = (u1 - u0) * (v1 - v0);
+    let denominator = area * area * (a + b + c + d);
+    let pdf = (4.0 * probability * weighted / denominator) as f32;
+    if denominator > 0.0 {
+        pdf
+    } else {
+        0.0
     }
 }
 

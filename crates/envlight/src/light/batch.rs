@@ -216,9 +216,10 @@ impl EnvironmentLight {
                 },
                 #[inline(always)]
                 |patches: &PatchBlock, out| {
+                    let mut planar = [0.0f32; QUERY_BLOCK];
+                    d.pdf_in_patches(&patches.patch, &patches.point, &mut planar);
                     for (i, o) in out.iter_mut().enumerate() {
-                        let planar = d.pdf_in_patch(patches.patch[i], patches.point[i]);
-                        *o = solid_angle(planar, patches.inv_jacobian[i]);
+                        *o = solid_angle(planar[i], patches.inv_jacobian[i]);
                     }
                 },
             ),
