@@ -35,8 +35,8 @@
 //! sampler does.)
 //!
 use crate::distribution::{
-    probability_of_widths, sanitize, CellSample, Distribution2D, Sample2D, ONE_MINUS_EPSILON,
-    STAGED_BLOCK,
+    positive_weight, probability_of_widths, sanitize, CellSample, Distribution2D, Sample2D,
+    ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
 use crate::math::prefetch_ptr;
@@ -143,12 +143,7 @@ impl BilinearDistribution2D {
                 for (i, m) in row.iter_mut().enumerate() {
                     let exact = mass(i, k);
                     sum += exact;
-                    let relative = (exact * patch_count) as f32;
-                    *m = if exact > 0.0 {
-                        relative.clamp(f32::from_bits(1), f32::MAX)
-                    } else {
-                        0.0
-                    };
+                    *m = positive_weight(exact * patch_count);
                 }
                 sum
             },

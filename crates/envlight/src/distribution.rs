@@ -351,6 +351,18 @@ pub(crate) fn sanitize(value: f32) -> f32 {
     }
 }
 
+/// `x ≥ 0` rounded to `f32` as a weight that keeps its support: a positive `x`
+/// stays positive (at least the smallest subnormal) and finite (at most
+/// `f32::MAX`); anything else is 0.
+#[inline(always)]
+pub(crate) fn positive_weight(x: f64) -> f32 {
+    if x > 0.0 {
+        (x as f32).clamp(f32::from_bits(1), f32::MAX)
+    } else {
+        0.0
+    }
+}
+
 /// A piecewise-constant distribution on `[0, 1]` with `n` equal cells.
 ///
 /// Guarantees: exactly the cells with `f > 0` are sampled; `pdf` is the exact density

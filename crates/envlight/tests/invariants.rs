@@ -151,6 +151,33 @@ invariant_cases! {
     equal_area_hierarchical_hot:   combo(hot(64, 32, 20, 3), Bilinear, Hierarchical, PiecewiseConstant, EqualArea, 0.0), FULL;
     equal_area_bilinear_sky:       combo(envlight::builtin::sky(256, 128), Bilinear, Inversion, PiecewiseBilinear, EqualArea, 0.0), FULL;
     hierarchical_wide_16384x1:     combo(gradient(16384, 1), Bilinear, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
+    // Sampling tables coarser than the map (`table_width`): the same checks, with
+    // the support check proving the pooling conservative.
+    table_half_hot_middle:         table(hot(64, 32, 27, 13), Bilinear, Inversion, 32), FULL;
+    table_quarter_hot_top_row:     table(hot(64, 32, 21, 0), Nearest, Inversion, 16), FULL;
+    table_quarter_random:          table(random(96, 48, 5), Bilinear, Inversion, 24), FULL;
+    table_alias_hot_seam:          table(hot(64, 32, 63, 20), Bilinear, Alias, 16), FULL;
+    table_hierarchical_sky:        table(envlight::builtin::sky(256, 128), Bilinear, Hierarchical, 64), FULL;
+    table_one_cell:                table(random(48, 24, 3), Bilinear, Inversion, 2), FULL;
+}
+
+/// A light whose sampling table is `table_width` cells wide.
+fn table(
+    image: EnvImage,
+    lookup: Lookup,
+    sampler: Sampler,
+    table_width: usize,
+) -> EnvironmentLight {
+    EnvironmentLight::new(
+        image,
+        LightOptions {
+            lookup,
+            sampler,
+            table_width: Some(table_width),
+            ..Default::default()
+        },
+    )
+    .unwrap()
 }
 
 /// One `#[test]` per all-black map: no sample, pdf 0, ∫p = 0, no NaN (200k ξ).

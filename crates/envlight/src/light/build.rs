@@ -7,7 +7,7 @@ use super::{Density, EnvironmentLight, LightOptions, Mapping, Planar, Sampler};
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
-use crate::distribution::{for_each_row, Distribution2D};
+use crate::distribution::{for_each_row, positive_weight, Distribution2D};
 use crate::equal_area;
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
@@ -84,7 +84,9 @@ impl EnvironmentLight {
                 ))
             }
         };
-        let (planar, integral_rgb, compensated) = build_sampler(&image, &options, rows_done);
+        let reduction = table_reduction(&image, &options)?;
+        let (planar, integral_rgb, compensated) =
+            build_sampler(&image, &options, reduction, rows_done);
         Ok(Self {
             world_to_light: options.rotation.inverse(),
             rotated: !options.rotation.is_identity(),
@@ -97,35 +99,110 @@ impl EnvironmentLight {
     }
 }
 
-/// The sampler for `options` over `image` (already in the light's mapping),
-/// `∫ L dω` of the unscaled image, and whether MIS compensation took effect.
-/// `rows_done` hears of every image row once its importance (or, for the bilinear
-/// density, its sums) is done: the one pass over the texels.
+/// The factor by which `options.table_width` reduces the sampling table below
+/// `image`'s resolution (1 for none), checked: it must be a whole number that
+/// divides both sides, and only the piecewise-constant density pools.
+fn table_reduction(image: &EnvImage, options: &LightOptions) -> Result<usize> {
+    let (w, h) = (image.width(), image.height());
+    let Some(table) = options.table_width else {
+        return Ok(1);
+    };
+    let bad = |why: String| {
+        Err(Error::InvalidOption(format!(
+            "sampling table width {table}: {why}"
+        )))
+    };
+    if table == 0 {
+        return bad("must be at least 1".into());
+    }
+    if table > w {
+        return bad(format!("wider than the light's image ({w} texels)"));
+    }
+    if w % table != 0 || h % (w / table) != 0 {
+        let fits: Vec<String> = (1..=w.min(64))
+            .filter(|f| w % f == 0 && h % f == 0)
+            .map(|f| (w / f).to_string())
+            .collect();
+        return bad(format!(
+            "the light's image is {w}x{h}, and the table must reduce both sides by the \
+             same whole factor: widths that do are {}",
+            fits.join(", ")
+        ));
+    }
+    if table != w && options.density != Density::PiecewiseConstant {
+        return bad("a reduced table needs the piecewise-constant density".into());
+    }
+    Ok(w / table)
+}
+
+/// The sampler for `options` over `image` (already in the light's mapping) with
+/// its table reduced by `reduction` ([`table_reduction`]), `∫ L dω` of the
+/// unscaled image, and whether MIS compensation took effect. `rows_done` hears of
+/// every image row once its importance (or, for the bilinear density, its sums)
+/// is done: the one pass over the texels.
 fn build_sampler(
     image: &EnvImage,
     options: &LightOptions,
+    reduction: usize,
     rows_done: &(dyn Fn(usize) + Sync),
 ) -> (Planar, [f64; 3], bool) {
     let (w, h) = (image.width(), image.height());
+    let (tw, th) = (w / reduction, h / reduction);
     let mapping = options.mapping;
-    let init = || LuminanceRows::new(w);
-    let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
-        let sums = importance_row(image, options.lookup, mapping, cache, j, out);
-        rows_done(1);
+    // Table row `k` from image rows `k r .. (k + 1) r`, each cell the sum of its
+    // r × r texels' importance (in f64); with the image rows' RGB sums.
+    let init = || (LuminanceRows::new(w), vec![0.0f32; w], vec![0.0f64; tw]);
+    let fill = |(cache, fine, pooled): &mut (LuminanceRows, Vec<f32>, Vec<f64>),
+                k: usize,
+                out: &mut [f32]| {
+        if reduction == 1 {
+            let sums = importance_row(image, options.lookup, mapping, cache, k, out);
+            rows_done(1);
+            return vec![sums];
+        }
+        pooled.fill(0.0);
+        let mut sums = Vec::with_capacity(reduction);
+        for j in k * reduction..(k + 1) * reduction {
+            sums.push(importance_row(
+                image,
+                options.lookup,
+                mapping,
+                cache,
+                j,
+                fine,
+            ));
+            for (p, block) in pooled.iter_mut().zip(fine.chunks_exact(reduction)) {
+                *p += block.iter().map(|&x| x as f64).sum::<f64>();
+            }
+            rows_done(1);
+        }
+        for (o, &p) in out.iter_mut().zip(pooled.iter()) {
+            *o = positive_weight(p);
+        }
         sums
     };
-    let integral = |row_sums: &[[f64; 3]]| integral_rgb(row_sums, w, options.lookup, mapping);
+    let integral =
+        |row_sums: Vec<Vec<[f64; 3]>>| integral_rgb(&row_sums.concat(), w, options.lookup, mapping);
     match options.density {
         Density::PiecewiseConstant
             if options.sampler == Sampler::Inversion && !options.mis_compensation =>
         {
             // The default path: importance rows go straight into CDFs, never stored.
-            let (distribution, row_sums) = Distribution2D::from_rows_with(w, h, init, fill);
-            (Planar::Inversion(distribution), integral(&row_sums), false)
+            let (distribution, row_sums) = Distribution2D::from_rows_with(tw, th, init, fill);
+            (Planar::Inversion(distribution), integral(row_sums), false)
         }
         Density::PiecewiseConstant => {
+            // Compensation needs the whole map's mean first, so the texel-grid
+            // importance is stored, compensated texel by texel (a texel above the
+            // mean keeps a positive weight), then pooled.
             let mut values = vec![0.0f32; w * h];
             let mut rows: Vec<&mut [f32]> = values.chunks_mut(w).collect();
+            let init = || LuminanceRows::new(w);
+            let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
+                let sums = importance_row(image, options.lookup, mapping, cache, j, out);
+                rows_done(1);
+                vec![sums]
+            };
             let (_, row_sums) = for_each_row(w, init, fill, &mut rows, |row, out| {
                 out.copy_from_slice(row);
                 0.0
@@ -135,13 +212,18 @@ fn build_sampler(
                 .then(|| compensate(&values, w, h, mapping))
                 .flatten();
             let compensated = subtracted.is_some();
-            let f = subtracted.as_deref().unwrap_or(&values);
-            let planar = match options.sampler {
-                Sampler::Inversion => Planar::Inversion(Distribution2D::new(f, w)),
-                Sampler::Alias => Planar::Alias(AliasTable2D::new(f, w)),
-                Sampler::Hierarchical => Planar::Hierarchical(Hierarchical2D::new(f, w)),
+            let f = subtracted.unwrap_or(values);
+            let f = if reduction > 1 {
+                pool(&f, w, reduction)
+            } else {
+                f
             };
-            (planar, integral(&row_sums), compensated)
+            let planar = match options.sampler {
+                Sampler::Inversion => Planar::Inversion(Distribution2D::new(&f, tw)),
+                Sampler::Alias => Planar::Alias(AliasTable2D::new(&f, tw)),
+                Sampler::Hierarchical => Planar::Hierarchical(Hierarchical2D::new(&f, tw)),
+            };
+            (planar, integral(row_sums), compensated)
         }
         Density::PiecewiseBilinear => {
             let row_sums: Vec<[f64; 3]> = (0..h)
@@ -161,11 +243,28 @@ fn build_sampler(
             }
             (
                 Planar::Bilinear(BilinearDistribution2D::new(&values, &u_nodes, &v_nodes)),
-                integral(&row_sums),
+                integral(vec![row_sums]),
                 compensated,
             )
         }
     }
+}
+
+/// The `w`-wide grid `f` with each `r × r` block summed into one cell (in f64,
+/// kept positive where any texel is: [`positive_weight`]).
+fn pool(f: &[f32], w: usize, r: usize) -> Vec<f32> {
+    let tw = w / r;
+    f.par_chunks(w * r)
+        .flat_map_iter(|rows| {
+            let mut pooled = vec![0.0f64; tw];
+            for row in rows.chunks_exact(w) {
+                for (p, block) in pooled.iter_mut().zip(row.chunks_exact(r)) {
+                    *p += block.iter().map(|&x| x as f64).sum::<f64>();
+                }
+            }
+            pooled.into_iter().map(positive_weight)
+        })
+        .collect()
 }
 
 /// MIS compensation of a texel-grid importance `f = Y · J_j`: `max(0, f − Ȳ J_j)`
@@ -524,5 +623,96 @@ mod tests {
             };
             assert!(EnvironmentLight::new(image.clone(), options).is_err());
         }
+    }
+
+    /// A reduced table's cells carry their blocks' summed importance, for every
+    /// sampler and with compensation; the integral is the full map's; a table as
+    /// wide as the map is the ordinary one.
+    #[test]
+    fn reduced_tables_pool_by_block_sums() {
+        let mut rng = crate::rng::SplitMix64::new(9);
+        let (w, h) = (24, 12);
+        let texels: Vec<[f32; 3]> = (0..w * h)
+            .map(|k| {
+                let y = if k % 37 == 5 { 50.0 } else { rng.next_f32() };
+                [y, y, y]
+            })
+            .collect();
+        let image = EnvImage::new(w, h, texels).unwrap();
+        let full = EnvironmentLight::new(image.clone(), LightOptions::default()).unwrap();
+        let mut importance = vec![0.0f32; w * h];
+        full.importance_rows(0, &mut importance);
+        for r in [1, 2, 3, 4, 6, 12] {
+            for sampler in [Sampler::Inversion, Sampler::Alias, Sampler::Hierarchical] {
+                let options = LightOptions {
+                    sampler,
+                    table_width: Some(w / r),
+                    ..Default::default()
+                };
+                let light = EnvironmentLight::new(image.clone(), options).unwrap();
+                assert_eq!(light.integral_rgb(), full.integral_rgb());
+                let (tw, th) = (w / r, h / r);
+                let total: f64 = importance.iter().map(|&x| x as f64).sum();
+                for k in 0..th {
+                    for i in 0..tw {
+                        let block: f64 = (k * r..(k + 1) * r)
+                            .flat_map(|j| (i * r..(i + 1) * r).map(move |x| (x, j)))
+                            .map(|(x, j)| importance[j * w + x] as f64)
+                            .sum();
+                        let want = block / total * (tw * th) as f64;
+                        let uv = [(i as f32 + 0.5) / tw as f32, (k as f32 + 0.5) / th as f32];
+                        let got = light.planar.pdf(uv) as f64;
+                        assert!(
+                            (got - want).abs() <= 1e-5 * want,
+                            "r {r} {sampler:?} cell ({i}, {k}): {got} vs {want}"
+                        );
+                    }
+                }
+                if r == 1 {
+                    assert_eq!(light.planar.pdf([0.3, 0.4]), full.planar.pdf([0.3, 0.4]));
+                }
+            }
+        }
+        // Compensation first, texel by texel, then pooling: a block holding a texel
+        // above the mean keeps a positive density, the others get none.
+        let options = LightOptions {
+            table_width: Some(w / 4),
+            mis_compensation: true,
+            sampler: Sampler::Alias,
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(image.clone(), options).unwrap();
+        assert!(light.is_compensated());
+        for (k, _) in (0..w * h).filter(|k| k % 37 == 5).map(|k| (k, ())) {
+            let (x, y) = (k % w, k / w);
+            let uv = [(x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32];
+            assert!(light.planar.pdf(uv) > 0.0, "hot texel ({x}, {y})");
+        }
+    }
+
+    #[test]
+    fn bad_table_widths_are_rejected_with_the_widths_that_fit() {
+        let image = EnvImage::from_fn(24, 12, |_, _| [1.0; 3]).unwrap();
+        let build = |table_width, density| {
+            let options = LightOptions {
+                table_width: Some(table_width),
+                density,
+                ..Default::default()
+            };
+            EnvironmentLight::new(image.clone(), options).map(|_| ())
+        };
+        let message = |r: Result<()>| r.unwrap_err().to_string();
+        assert!(message(build(0, Density::PiecewiseConstant)).contains("at least 1"));
+        assert!(message(build(48, Density::PiecewiseConstant)).contains("wider"));
+        let m = message(build(5, Density::PiecewiseConstant));
+        assert!(
+            m.contains("24x12") && m.contains("24, 12, 8, 6, 4, 2"),
+            "{m}"
+        );
+        // 16 divides neither side by the same factor.
+        assert!(build(16, Density::PiecewiseConstant).is_err());
+        assert!(message(build(12, Density::PiecewiseBilinear)).contains("piecewise-constant"));
+        assert!(build(24, Density::PiecewiseBilinear).is_ok());
+        assert!(build(12, Density::PiecewiseConstant).is_ok());
     }
 }

@@ -58,8 +58,9 @@ impl EnvironmentLight {
             .map_init(init, |(cache, [above, here, below]), j| {
                 let (mut ey, mut ey2p) = (0.0f64, 0.0f64);
                 // The reciprocal of each texel's (constant) pdf, +∞ where it is 0:
-                // one division per texel instead of one per node. The densities'
-                // grids are the image's, so texel (i, j) is cell (i, j).
+                // one division per texel instead of one per node. A table reduced
+                // by r pools r × r texels per cell: texel (i, j) is in cell
+                // (i / r, j / r).
                 let reciprocal = |p: f32| {
                     if p > 0.0 {
                         1.0 / p as f64
@@ -67,12 +68,14 @@ impl EnvironmentLight {
                         f64::INFINITY
                     }
                 };
+                let per_texel = |nu: usize, cell_pdf: &dyn Fn(usize, usize) -> f32| {
+                    let r = w / nu;
+                    (0..w).map(|i| reciprocal(cell_pdf(i / r, j / r))).collect()
+                };
                 let inv_texel_pdf: Vec<f64> = match &self.planar {
-                    Planar::Inversion(d) => (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect(),
-                    Planar::Alias(d) => (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect(),
-                    Planar::Hierarchical(d) => {
-                        (0..w).map(|i| reciprocal(d.cell_pdf(i, j))).collect()
-                    }
+                    Planar::Inversion(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
+                    Planar::Alias(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
+                    Planar::Hierarchical(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
                     Planar::Bilinear(_) => Vec::new(),
                 };
                 // The neighbouring rows a node above or below the centre blends with

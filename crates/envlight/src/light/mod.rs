@@ -192,6 +192,17 @@ pub struct LightOptions {
     /// does (BSDF sampling), where the combination stays unbiased. A map with
     /// nothing above its mean (a constant map) keeps the ordinary density.
     pub mis_compensation: bool,
+    /// Width of the sampling table, in cells, when it should be coarser than the
+    /// light's image (`None`: one cell per texel). It must divide the image's
+    /// width, and the reduction factor `width / table_width` its height; each cell
+    /// then pools a factor × factor block of texels by **summing** their filtered
+    /// importance, so the table is conservative: every texel the radiance lookup
+    /// can see lit keeps a positive density (its cell's, spread evenly over the
+    /// cell). Radiance is still looked up at full resolution. Building from a
+    /// 16k map costs about the same decoding and importance work, but CDFs and
+    /// memory `factor²` times smaller; the price is efficiency, which
+    /// [`EnvironmentLight::efficiency`] measures. Piecewise-constant density only.
+    pub table_width: Option<usize>,
 }
 
 impl Default for LightOptions {
@@ -206,6 +217,7 @@ impl Default for LightOptions {
             input_mapping: Mapping::Equirectangular,
             equal_area_size: None,
             mis_compensation: false,
+            table_width: None,
         }
     }
 }
