@@ -625,6 +625,33 @@ mod tests {
         }
     }
 
+    /// The reduction's cost measured in one pass equals the efficiency of a
+    /// light built with the full table; a full table reports no cost.
+    #[test]
+    fn full_table_efficiency_matches_the_full_light() {
+        let image = crate::builtin::sky(96, 48);
+        let full = EnvironmentLight::new(image.clone(), LightOptions::default()).unwrap();
+        assert_eq!(full.efficiency_with_full_table(), (full.efficiency(), None));
+        for (table_width, sampler) in [(48, Sampler::Inversion), (24, Sampler::Alias)] {
+            let options = LightOptions {
+                table_width: Some(table_width),
+                sampler,
+                ..Default::default()
+            };
+            let reduced = EnvironmentLight::new(image.clone(), options).unwrap();
+            assert_eq!(reduced.table_size(), [table_width, table_width / 2]);
+            let (own, at_full) = reduced.efficiency_with_full_table();
+            assert_eq!(own, reduced.efficiency());
+            let at_full = at_full.expect("a reduced table reports the full one's");
+            assert!(
+                (at_full / full.efficiency() - 1.0).abs() < 1e-6,
+                "{at_full} vs {}",
+                full.efficiency()
+            );
+            assert!(own < at_full, "{own} vs {at_full}");
+        }
+    }
+
     /// A reduced table's cells carry their blocks' summed importance, for every
     /// sampler and with compensation; the integral is the full map's; a table as
     /// wide as the map is the ordinary one.

@@ -1,7 +1,7 @@
 //! [`EnvironmentLight::efficiency`]: the sampling efficiency
 //! `(∫ Y dω)² / ∫ (Y² / p) dω` by Gauss-Legendre quadrature over the image.
 
-use super::build::LuminanceRows;
+use super::build::{importance_row, LuminanceRows};
 use super::{EnvironmentLight, Mapping, Planar};
 use crate::equal_area::EQUAL_AREA_JACOBIAN;
 use crate::image::{Lookup, WrapU};
@@ -17,12 +17,25 @@ impl EnvironmentLight {
     /// Computed by quadrature (2×2 Gauss-Legendre points in each quarter of every
     /// texel, exact for bilinear radiance in u), in parallel. `O(16 w h)` lookups.
     pub fn efficiency(&self) -> f64 {
-        let (ey, ey2p) = self.luminance_moments();
-        if ey > 0.0 && ey2p.is_finite() && ey2p > 0.0 {
-            ey * ey / ey2p
-        } else {
-            0.0
-        }
+        let (ey, ey2p, _) = self.luminance_moments(false);
+        efficiency_of(ey, ey2p)
+    }
+
+    /// [`Self::efficiency`], and for a light whose sampling table was reduced
+    /// ([`LightOptions::table_width`](super::LightOptions::table_width)) the
+    /// efficiency the full-resolution table would have had: what the reduction
+    /// costs. Both come from one quadrature pass; the full table's density is read
+    /// from the texel-grid importance (with the full table's normalisation), so no
+    /// full table is built. The second figure is `None` for a table that was not
+    /// reduced and for a compensated light.
+    pub fn efficiency_with_full_table(&self) -> (f64, Option<f64>) {
+        let reduced = self.table_size() != [self.image.width(), self.image.height()];
+        let full = reduced && !self.compensated;
+        let (ey, ey2p, ey2p_full) = self.luminance_moments(full);
+        (
+            efficiency_of(ey, ey2p),
+            full.then(|| efficiency_of(ey, ey2p_full)),
+        )
     }
 
     /// `(∫ Y dω, ∫ Y²/p dω)` by quadrature over the image (unscaled; efficiency is
@@ -35,7 +48,10 @@ impl EnvironmentLight {
     /// once, then read at the u nodes (luminance is linear in RGB). The pdf is read
     /// at every node for the bilinear density, and once per texel for the others,
     /// which are constant over each texel.
-    fn luminance_moments(&self) -> (f64, f64) {
+    ///
+    /// With `full_table`, also `∫ Y²/p` for the density of the full-resolution
+    /// table (`p ∝` the texel-grid importance), as the third value (else 0).
+    fn luminance_moments(&self, full_table: bool) -> (f64, f64, f64) {
         let (w, h) = (self.image.width(), self.image.height());
         let nodes = efficiency_nodes();
         let (mapping, lookup) = (self.options.mapping, self.options.lookup);
@@ -45,6 +61,10 @@ impl EnvironmentLight {
             Mapping::EqualArea => EQUAL_AREA_JACOBIAN as f64,
         };
         let constant_per_texel = !matches!(self.planar, Planar::Bilinear(_));
+        // The full table's planar pdf is f · w h / Σ f; a reduced table's cells sum
+        // their blocks, so Σ f is its integral times its cell count.
+        let [tw, th] = self.table_size();
+        let full_scale = (w * h) as f64 / (self.planar.integral() * (tw * th) as f64);
         // Rows go to each task in runs of neighbours, so a cache of the last three
         // rows' luminance computes each row's about once instead of three times.
         let init = || {
@@ -56,7 +76,7 @@ impl EnvironmentLight {
         (0..h)
             .into_par_iter()
             .map_init(init, |(cache, [above, here, below]), j| {
-                let (mut ey, mut ey2p) = (0.0f64, 0.0f64);
+                let (mut ey, mut ey2p, mut ey2p_full) = (0.0f64, 0.0f64, 0.0f64);
                 // The reciprocal of each texel's (constant) pdf, +∞ where it is 0:
                 // one division per texel instead of one per node. A table reduced
                 // by r pools r × r texels per cell: texel (i, j) is in cell
@@ -77,6 +97,15 @@ impl EnvironmentLight {
                     Planar::Alias(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
                     Planar::Hierarchical(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
                     Planar::Bilinear(_) => Vec::new(),
+                };
+                let inv_full_pdf: Vec<f64> = if full_table {
+                    let mut f = vec![0.0f32; w];
+                    importance_row(&self.image, lookup, mapping, cache, j, &mut f);
+                    f.iter()
+                        .map(|&x| reciprocal((x as f64 * full_scale) as f32))
+                        .collect()
+                } else {
+                    Vec::new()
                 };
                 // The neighbouring rows a node above or below the centre blends with
                 // (clamped at the top and bottom).
@@ -106,6 +135,11 @@ impl EnvironmentLight {
                             node_row_moments(&blended, &inv_texel_pdf, lookup, periodic);
                         ey += sum_y * dw;
                         ey2p += sum_y2p * (dw * dw);
+                        if full_table {
+                            let (_, full) =
+                                node_row_moments(&blended, &inv_full_pdf, lookup, periodic);
+                            ey2p_full += full * (dw * dw);
+                        }
                         continue;
                     }
                     for i in 0..w {
@@ -149,11 +183,20 @@ impl EnvironmentLight {
                     }
                 }
                 let cell = 1.0 / (16.0 * w as f64 * h as f64);
-                (ey * cell, ey2p * cell)
+                (ey * cell, ey2p * cell, ey2p_full * cell)
             })
             .collect::<Vec<_>>()
             .into_iter()
-            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+            .fold((0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
+    }
+}
+
+/// `(∫ Y)² / ∫ Y²/p`, or 0 when either is not positive and finite.
+fn efficiency_of(ey: f64, ey2p: f64) -> f64 {
+    if ey > 0.0 && ey2p.is_finite() && ey2p > 0.0 {
+        ey * ey / ey2p
+    } else {
+        0.0
     }
 }
 

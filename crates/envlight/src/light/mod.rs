@@ -341,6 +341,18 @@ impl EnvironmentLight {
         integral.is_nan() || integral <= 0.0
     }
 
+    /// The sampling table's size in cells, `[width, height]`: the image's, unless
+    /// [`LightOptions::table_width`] reduced it (the bilinear density's nodes sit
+    /// at the texel centres, so its table is the image's too).
+    pub fn table_size(&self) -> [usize; 2] {
+        match &self.planar {
+            Planar::Inversion(d) => [d.nu(), d.nv()],
+            Planar::Alias(d) => [d.nu(), d.nv()],
+            Planar::Hierarchical(d) => [d.nu(), d.nv()],
+            Planar::Bilinear(_) => [self.image.width(), self.image.height()],
+        }
+    }
+
     /// Bytes of sampling data (excluding the image).
     pub fn sampling_bytes(&self) -> usize {
         self.planar.memory_bytes()
