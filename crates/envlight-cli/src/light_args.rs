@@ -65,6 +65,15 @@ pub struct LightArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub equal_area_size: Option<u64>,
 
+    /// Build the sampling table W cells wide instead of one cell per texel: each
+    /// cell sums the filtered importance of a block of texels (conservative: every
+    /// lit texel keeps a positive density), radiance is still looked up at full
+    /// resolution. W must reduce the light's width and height by the same whole
+    /// factor. Piecewise-constant density only; `info` reports the efficiency it
+    /// costs.
+    #[arg(long, value_name = "W", value_parser = clap::value_parser!(u64).range(1..))]
+    pub table_size: Option<u64>,
+
     /// Refuse maps with more texels than N (guards against absurd headers).
     #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_TEXELS)]
     pub max_texels: usize,
@@ -240,6 +249,9 @@ impl LightArgs {
             equal_area_size: self
                 .equal_area_size
                 .map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
+            table_width: self
+                .table_size
+                .map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
             ..Default::default()
         }
     }
@@ -260,6 +272,14 @@ impl LightArgs {
                 choice_name(&self.density),
                 choice_name(&self.sampler),
                 choice_name(&SamplerArg::Inversion),
+            )));
+        }
+        if self.table_size.is_some() && self.density != DensityArg::PiecewiseConstant {
+            return Err(UsageError(format!(
+                "--table-size with --density {} is not supported: a reduced sampling table \
+                 needs --density {}",
+                choice_name(&self.density),
+                choice_name(&DensityArg::PiecewiseConstant),
             )));
         }
         let mapping = self.mapping();
@@ -391,12 +411,19 @@ impl LightArgs {
         let options = self.light_options();
         // The build reports rows of the light's image: the resampled square for an
         // equal-area light from a lat-long map.
-        let rows = match (options.input_mapping, options.mapping) {
-            (Mapping::Equirectangular, Mapping::EqualArea) => options
-                .equal_area_size
-                .unwrap_or_else(|| envlight::equal_area::default_size(input_width, input_height)),
-            _ => input_height,
+        let (columns, rows) = match (options.input_mapping, options.mapping) {
+            (Mapping::Equirectangular, Mapping::EqualArea) => {
+                let side = options.equal_area_size.unwrap_or_else(|| {
+                    envlight::equal_area::default_size(input_width, input_height)
+                });
+                (side, side)
+            }
+            _ => (input_width, input_height),
         };
+        // A table width that does not fit this map is the option's fault: a usage
+        // error, found before the build.
+        envlight::light::table_reduction(columns, rows, &options)
+            .map_err(|e| UsageError(format!("--table-size: {name}: {e}")))?;
         let bar = Progress::bar(rows as u64, "building");
         let started = Instant::now();
         let light = EnvironmentLight::with_progress(image, options, &|k| bar.inc(k as u64))

@@ -65,7 +65,8 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let integral_luminance = light.integral_luminance();
     let power = light.power(1.0);
     let started = Instant::now();
-    let efficiency = light.efficiency();
+    let (efficiency, full_table_efficiency) = light.efficiency_with_full_table();
+    let [table_width, table_height] = light.table_size();
     let efficiency_ms = started.elapsed().as_secs_f64() * 1e3;
     let brightest = brightest.to_array();
     let shading = args.normal.normal.map(|n| Shading::measure(light, n));
@@ -92,6 +93,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             "max_luminance": max_luminance,
             "brightest_direction": brightest,
             "efficiency": efficiency,
+            "table_width": table_width,
+            "table_height": table_height,
+            "full_table_efficiency": full_table_efficiency,
             "sampling_bytes": light.sampling_bytes(),
             "load_ms": loaded.load_ms,
             "build_ms": loaded.build_ms,
@@ -180,8 +184,24 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             ),
             (
                 "sampling",
-                format!("{:.2} MiB", mib(light.sampling_bytes())),
+                format!(
+                    "{:.2} MiB, table {table_width} x {table_height} cells",
+                    mib(light.sampling_bytes())
+                ),
             ),
+        ]);
+        if let Some(full) = full_table_efficiency {
+            lines.push((
+                "reduction",
+                format!(
+                    "{}x: efficiency {efficiency:.5} against {full:.5} with the full table \
+                     (variance per sample x{:.3})",
+                    image.width() / table_width,
+                    variance_ratio(efficiency, full)
+                ),
+            ));
+        }
+        lines.extend([
             (
                 "time",
                 format!(
@@ -299,5 +319,18 @@ impl Shading {
             light_efficiency: light_only.efficiency,
             ms: started.elapsed().as_secs_f64() * 1e3,
         }
+    }
+}
+
+/// How many times the variance per sample of `Y/p` grows from efficiency `full`
+/// to `reduced`: `(1/reduced − 1) / (1/full − 1)`; 1 when both are exact.
+fn variance_ratio(reduced: f64, full: f64) -> f64 {
+    let (a, b) = (1.0 / reduced - 1.0, 1.0 / full - 1.0);
+    if b > 0.0 {
+        a / b
+    } else if a > 0.0 {
+        f64::INFINITY
+    } else {
+        1.0
     }
 }

@@ -84,7 +84,7 @@ impl EnvironmentLight {
                 ))
             }
         };
-        let reduction = table_reduction(&image, &options)?;
+        let reduction = table_reduction(image.width(), image.height(), &options)?;
         let (planar, integral_rgb, compensated) =
             build_sampler(&image, &options, reduction, rows_done);
         Ok(Self {
@@ -99,11 +99,15 @@ impl EnvironmentLight {
     }
 }
 
-/// The factor by which `options.table_width` reduces the sampling table below
-/// `image`'s resolution (1 for none), checked: it must be a whole number that
-/// divides both sides, and only the piecewise-constant density pools.
-fn table_reduction(image: &EnvImage, options: &LightOptions) -> Result<usize> {
-    let (w, h) = (image.width(), image.height());
+/// The factor by which `options.table_width` reduces the sampling table of a
+/// light whose own image (after any resampling to its mapping) is `w × h` (1 for
+/// no reduction), checked as [`EnvironmentLight::new`] checks it: the factor must
+/// be a whole number that divides both sides, and only the piecewise-constant
+/// density pools. Front ends call it to refuse a bad width before building.
+///
+/// # Errors
+/// [`Error::InvalidOption`], naming the widths that would fit.
+pub fn table_reduction(w: usize, h: usize, options: &LightOptions) -> Result<usize> {
     let Some(table) = options.table_width else {
         return Ok(1);
     };

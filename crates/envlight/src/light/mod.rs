@@ -25,6 +25,7 @@
 
 mod batch;
 mod build;
+pub use build::table_reduction;
 mod efficiency;
 
 use crate::alias::AliasTable2D;
