@@ -201,15 +201,13 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
                 ),
             ));
         }
-        lines.extend([
-            (
-                "time",
-                format!(
-                    "load {:.1} ms, build {:.1} ms, efficiency {efficiency_ms:.1} ms",
-                    loaded.load_ms, loaded.build_ms
-                ),
+        lines.extend([(
+            "time",
+            format!(
+                "load {:.1} ms, build {:.1} ms, efficiency {efficiency_ms:.1} ms",
+                loaded.load_ms, loaded.build_ms
             ),
-        ]);
+        )]);
         if loaded.sanitized.negative_texels > 0 {
             lines.push((
                 "negative",

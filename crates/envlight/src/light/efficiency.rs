@@ -131,15 +131,18 @@ impl EnvironmentLight {
                         }
                     }
                     if constant_per_texel {
-                        let (sum_y, sum_y2p) =
-                            node_row_moments(&blended, &inv_texel_pdf, lookup, periodic);
+                        // Without a full table to weigh, the texels' own pdfs twice
+                        // (one multiply-add per texel, cheaper than a branch).
+                        let second = if full_table {
+                            &inv_full_pdf
+                        } else {
+                            &inv_texel_pdf
+                        };
+                        let [sum_y, sum_y2p, sum_y2p_full] =
+                            node_row_moments(&blended, [&inv_texel_pdf, second], lookup, periodic);
                         ey += sum_y * dw;
                         ey2p += sum_y2p * (dw * dw);
-                        if full_table {
-                            let (_, full) =
-                                node_row_moments(&blended, &inv_full_pdf, lookup, periodic);
-                            ey2p_full += full * (dw * dw);
-                        }
+                        ey2p_full += sum_y2p_full * (dw * dw);
                         continue;
                     }
                     for i in 0..w {
@@ -183,7 +186,8 @@ impl EnvironmentLight {
                     }
                 }
                 let cell = 1.0 / (16.0 * w as f64 * h as f64);
-                (ey * cell, ey2p * cell, ey2p_full * cell)
+                let full = if full_table { ey2p_full * cell } else { 0.0 };
+                (ey * cell, ey2p * cell, full)
             })
             .collect::<Vec<_>>()
             .into_iter()
@@ -213,9 +217,10 @@ fn efficiency_nodes() -> [f64; 4] {
 }
 
 /// One row of quadrature nodes (at one height) of [`EnvironmentLight::efficiency`]
-/// for a density that is constant over each texel: `(Σ_i Σ_nodes y, Σ_i Σ_nodes y² /
-/// p_i)` over the texels' four u nodes, from the row's reconstructed luminance
-/// `blended` at the texel centres and each texel's `1 / p` (+∞ where p = 0).
+/// for a density that is constant over each texel: `[Σ_i Σ_nodes y, Σ_i Σ_nodes
+/// y² / p_i, Σ_i Σ_nodes y² / q_i]` over the texels' four u nodes, from the row's
+/// reconstructed luminance `blended` at the texel centres and each texel's `1 / p`
+/// and `1 / q` (two densities at once; +∞ where a density is 0).
 ///
 /// Within a texel, y is constant (nearest) or linear on each half (bilinear), and the
 /// four Gauss-Legendre nodes, exact for cubics on each half, sum to closed forms:
@@ -223,12 +228,12 @@ fn efficiency_nodes() -> [f64; 4] {
 /// through a loop without branches, with four partial sums.
 fn node_row_moments(
     blended: &[f32],
-    inv_pdf: &[f64],
+    [inv_p, inv_q]: [&[f64]; 2],
     lookup: Lookup,
     periodic: bool,
-) -> (f64, f64) {
+) -> [f64; 3] {
     let w = blended.len();
-    let texel = |left: f32, centre: f32, right: f32, inv_pdf: f64| {
+    let texel = |left: f32, centre: f32, right: f32, inv_p: f64, inv_q: f64| {
         let c = centre as f64;
         let (sum_y, sum_y2) = match lookup {
             Lookup::Nearest => (4.0 * c, 4.0 * c * c),
@@ -239,8 +244,13 @@ fn node_row_moments(
                 (l + 2.0 * c + r, (2.0 / 3.0) * (square(l, c) + square(c, r)))
             }
         };
-        // A texel with no light adds nothing, even where the pdf is 0.
-        (sum_y, if sum_y2 > 0.0 { sum_y2 * inv_pdf } else { 0.0 })
+        // A texel with no light adds nothing, even where a pdf is 0.
+        let lit = sum_y2 > 0.0;
+        [
+            sum_y,
+            if lit { sum_y2 * inv_p } else { 0.0 },
+            if lit { sum_y2 * inv_q } else { 0.0 },
+        ]
     };
     let (first, last) = (blended[0], blended[w - 1]);
     let (before_first, beyond_last) = if periodic {
@@ -249,25 +259,36 @@ fn node_row_moments(
         (first, last)
     };
     if w == 1 {
-        return texel(before_first, first, beyond_last, inv_pdf[0]);
+        return texel(before_first, first, beyond_last, inv_p[0], inv_q[0]);
     }
-    let mut partial = [(0.0f64, 0.0f64); 4];
-    for (k, (window, &inv)) in blended.windows(3).zip(&inv_pdf[1..]).enumerate() {
-        let (y, y2p) = texel(window[0], window[1], window[2], inv);
-        let p = &mut partial[k & 3];
-        p.0 += y;
-        p.1 += y2p;
+    let mut partial = [[0.0f64; 3]; 4];
+    for (k, ((window, &p), &q)) in blended
+        .windows(3)
+        .zip(&inv_p[1..])
+        .zip(&inv_q[1..])
+        .enumerate()
+    {
+        let t = texel(window[0], window[1], window[2], p, q);
+        let sums = &mut partial[k & 3];
+        for m in 0..3 {
+            sums[m] += t[m];
+        }
     }
     let edges = [
-        texel(before_first, first, blended[1], inv_pdf[0]),
-        texel(blended[w - 2], last, beyond_last, inv_pdf[w - 1]),
+        texel(before_first, first, blended[1], inv_p[0], inv_q[0]),
+        texel(
+            blended[w - 2],
+            last,
+            beyond_last,
+            inv_p[w - 1],
+            inv_q[w - 1],
+        ),
     ];
-    let sum = |f: fn(&(f64, f64)) -> f64| {
-        (f(&partial[0]) + f(&partial[1]))
-            + (f(&partial[2]) + f(&partial[3]))
-            + (f(&edges[0]) + f(&edges[1]))
-    };
-    (sum(|p| p.0), sum(|p| p.1))
+    std::array::from_fn(|m| {
+        (partial[0][m] + partial[1][m])
+            + (partial[2][m] + partial[3][m])
+            + (edges[0][m] + edges[1][m])
+    })
 }
 
 #[cfg(test)]
@@ -328,7 +349,10 @@ mod tests {
                             }
                         }
                     }
-                    let (y, y2p) = node_row_moments(&blended, &inv_pdf, lookup, periodic);
+                    let halved: Vec<f64> = inv_pdf.iter().map(|x| 0.5 * x).collect();
+                    let [y, y2p, y2q] =
+                        node_row_moments(&blended, [&inv_pdf, &halved], lookup, periodic);
+                    assert!(y2q == 0.5 * y2p || (y2q - 0.5 * y2p).abs() <= 1e-12 * y2p);
                     let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * b.abs();
                     assert!(
                         close(y, want_y) && close(y2p, want_y2p),
