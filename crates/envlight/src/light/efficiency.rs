@@ -90,7 +90,9 @@ impl EnvironmentLight {
                 };
                 let per_texel = |nu: usize, cell_pdf: &dyn Fn(usize, usize) -> f32| {
                     let r = w / nu;
-                    (0..w).map(|i| reciprocal(cell_pdf(i / r, j / r))).collect()
+                    (0..nu)
+                        .flat_map(|i| std::iter::repeat_n(reciprocal(cell_pdf(i, j / r)), r))
+                        .collect()
                 };
                 let inv_texel_pdf: Vec<f64> = match &self.planar {
                     Planar::Inversion(d) => per_texel(d.nu(), &|i, j| d.cell_pdf(i, j)),
