@@ -27,12 +27,19 @@ class EnvironmentLight:
         rotate: float = 0.0,
         scale: float = 1.0,
         frame: _Frame = "z-up",
+        table_width: Optional[int] = None,
     ) -> None:
         """Loads a map (.hdr, .exr, .pfm, or 8-bit .png/.jpg).
 
+        table_width: build the sampling table this many cells wide instead of one
+        cell per texel (each cell sums a block of texels' filtered importance, so
+        every lit texel keeps a positive density; radiance stays at full
+        resolution). It must reduce the width and height by the same whole factor;
+        piecewise-constant density only.
+
         Raises FileNotFoundError for a missing file, OSError for one that cannot be
-        read or decoded, ValueError for a NaN or infinite texel (naming it) or an
-        unknown option."""
+        read or decoded, ValueError for a NaN or infinite texel (naming it), an
+        unknown option or a table width that does not fit."""
     @staticmethod
     def from_array(
         rgb: _F32,
@@ -44,6 +51,7 @@ class EnvironmentLight:
         rotate: float = 0.0,
         scale: float = 1.0,
         frame: _Frame = "z-up",
+        table_width: Optional[int] = None,
     ) -> "EnvironmentLight":
         """A light from an (H, W, 3) float32 array of linear RGB (row 0 at the top)."""
     def sample(self, u: _F32) -> Tuple[_F32, _F32, _F32]:
@@ -95,6 +103,12 @@ class EnvironmentLight:
     def efficiency(self) -> float: ...
     @property
     def brightest_direction(self) -> Tuple[float, float, float]: ...
+    @property
+    def table_size(self) -> Tuple[int, int]:
+        """(width, height) of the sampling table in cells."""
+    @property
+    def full_table_efficiency(self) -> Optional[float]:
+        """With table_width: the full-resolution table's efficiency (else None)."""
     @property
     def sampling_bytes(self) -> int: ...
     @property

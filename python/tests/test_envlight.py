@@ -212,6 +212,16 @@ def test_options():
         light = envlight.EnvironmentLight.from_array(rgb, **kw)
         d, p, _ = light.sample(uniform_u(1000))
         assert np.allclose(light.pdf(d), p, rtol=1e-3), kw
+    reduced = envlight.EnvironmentLight.from_array(rgb, table_width=rgb.shape[1] // 4)
+    assert reduced.table_size == (rgb.shape[1] // 4, rgb.shape[0] // 4)
+    full = envlight.EnvironmentLight.from_array(rgb)
+    assert full.table_size == (rgb.shape[1], rgb.shape[0]) and full.full_table_efficiency is None
+    assert reduced.efficiency < reduced.full_table_efficiency
+    assert abs(reduced.full_table_efficiency / full.efficiency - 1) < 1e-6
+    d, p, _ = reduced.sample(uniform_u(1000))
+    assert np.allclose(reduced.pdf(d), p, rtol=1e-3)
+    with pytest.raises(ValueError, match="widths that do are"):
+        envlight.EnvironmentLight.from_array(rgb, table_width=rgb.shape[1] - 1)
     with pytest.raises(ValueError, match="alias sampler has no inverse"):
         envlight.EnvironmentLight.from_array(rgb, sampler="alias").invert(np.zeros((1, 3), np.float32))
 

@@ -317,7 +317,7 @@ fn as_triples_mut(values: &mut [f32]) -> &mut [[f32; 3]] {
 #[pymethods]
 impl PyEnvironmentLight {
     #[new]
-    #[pyo3(signature = (path, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up"))]
+    #[pyo3(signature = (path, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -329,8 +329,12 @@ impl PyEnvironmentLight {
         rotate: f32,
         scale: f32,
         frame: &str,
+        table_width: Option<usize>,
     ) -> PyResult<Self> {
-        let options = light_options(sampler, density, mapping, lookup, rotate, scale)?;
+        let options = LightOptions {
+            table_width,
+            ..light_options(sampler, density, mapping, lookup, rotate, scale)?
+        };
         let frame = Frame::parse(frame)?;
         let image = py
             .detach(|| load(&path, &LoadOptions::default()))
@@ -342,7 +346,7 @@ impl PyEnvironmentLight {
     /// A light from an `(H, W, 3)` float32 array of linear RGB radiance, row 0 at
     /// the top (θ = 0), column 0 at φ = 0.
     #[staticmethod]
-    #[pyo3(signature = (rgb, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up"))]
+    #[pyo3(signature = (rgb, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_array(
         py: Python<'_>,
@@ -354,6 +358,7 @@ impl PyEnvironmentLight {
         rotate: f32,
         scale: f32,
         frame: &str,
+        table_width: Option<usize>,
     ) -> PyResult<Self> {
         let rgb: PyReadonlyArray3<'_, f32> = rgb.extract().map_err(|_| {
             PyTypeError::new_err("rgb must be a numpy float32 array of shape (H, W, 3)")
@@ -365,7 +370,10 @@ impl PyEnvironmentLight {
             )));
         }
         let (h, w) = (shape[0], shape[1]);
-        let options = light_options(sampler, density, mapping, lookup, rotate, scale)?;
+        let options = LightOptions {
+            table_width,
+            ..light_options(sampler, density, mapping, lookup, rotate, scale)?
+        };
         let frame = Frame::parse(frame)?;
         let values: Vec<f32> = match rgb.as_slice() {
             Ok(s) if rgb.is_c_contiguous() => s.to_vec(),
@@ -599,6 +607,22 @@ impl PyEnvironmentLight {
     fn brightest_direction(&self) -> (f32, f32, f32) {
         let d = self.frame.z_up_to_frame(self.light.brightest().1);
         (d.x, d.y, d.z)
+    }
+
+    /// `(width, height)` of the sampling table in cells: the light's image's,
+    /// unless `table_width` reduced it.
+    #[getter]
+    fn table_size(&self) -> (usize, usize) {
+        let [w, h] = self.light.table_size();
+        (w, h)
+    }
+
+    /// The efficiency the full-resolution table would have had, for a light whose
+    /// table `table_width` reduced (what the reduction costs: compare with
+    /// `efficiency`); `None` otherwise.
+    #[getter]
+    fn full_table_efficiency(&self, py: Python<'_>) -> Option<f64> {
+        py.detach(|| self.light.efficiency_with_full_table().1)
     }
 
     /// Bytes of sampling data.
