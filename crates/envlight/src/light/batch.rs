@@ -18,13 +18,7 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
-        self.run_batch(xi, out, Self::sample_chunk, Self::sample_chunk_avx2);
-    }
-
-    /// [`Self::sample_chunk`] compiled for AVX2 (see [`wide_vectors`]).
-    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    fn sample_chunk_avx2(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
-        self.sample_chunk(xi, out)
+        self.run_batch(xi, out, Self::sample_chunk, Self::sample_chunk_wide());
     }
 
     /// [`Self::sample_batch`] on one chunk, on the current thread.
@@ -139,34 +133,32 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
-        self.run_batch(directions, out, Self::pdf_chunk, Self::pdf_chunk_avx2);
+        self.run_batch(directions, out, Self::pdf_chunk, Self::pdf_chunk_wide());
     }
 
-    /// Hands matching chunks of `directions` (or samples) and `out` to `kernel`, in parallel,
-    /// or to `wide_kernel` (the same code compiled for AVX2) where the CPU has
-    /// AVX2 (see [`wide_vectors`]).
+    /// Hands matching chunks of `input` (directions or samples) and `out` to
+    /// `kernel`, in parallel, or to the same code compiled for the widest vectors
+    /// the CPU has ([`VectorWidth`]) from `wide`.
     fn run_batch<I: Sync, O: Send>(
         &self,
-        directions: &[I],
+        input: &[I],
         out: &mut [O],
         kernel: fn(&Self, &[I], &mut [O]),
-        wide_kernel: unsafe fn(&Self, &[I], &mut [O]),
+        wide: WideKernels<Self, I, O>,
     ) {
-        let wide = wide_vectors();
-        batch_chunks(directions, out, |dirs, out| {
-            if wide {
-                // SAFETY: the wide kernels need AVX2, which the CPU supports.
-                unsafe { wide_kernel(self, dirs, out) }
-            } else {
-                kernel(self, dirs, out)
-            }
+        let width = VectorWidth::detect();
+        batch_chunks(input, out, |input, out| match width {
+            // SAFETY: each wide kernel runs only on a CPU with its features.
+            VectorWidth::Avx512 => unsafe { (wide.avx512)(self, input, out) },
+            VectorWidth::Avx2 => unsafe { (wide.avx2)(self, input, out) },
+            VectorWidth::Baseline => kernel(self, input, out),
         });
     }
 
-    /// [`Self::pdf_chunk`] compiled for AVX2 (see [`wide_vectors`]).
-    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    fn pdf_chunk_avx2(&self, dirs: &[Vec3], out: &mut [f32]) {
-        self.pdf_chunk(dirs, out)
+    wide_kernels! {
+        sample_chunk_wide => sample_chunk([f32; 2], Option<LightSample>);
+        pdf_chunk_wide => pdf_chunk(Vec3, f32);
+        radiance_chunk_wide => radiance_chunk(Vec3, [f32; 3]);
     }
 
     /// [`Self::pdf_batch`] on one chunk, on the current thread. For the
@@ -367,14 +359,8 @@ impl EnvironmentLight {
             directions,
             out,
             Self::radiance_chunk,
-            Self::radiance_chunk_avx2,
+            Self::radiance_chunk_wide(),
         );
-    }
-
-    /// [`Self::radiance_chunk`] compiled for AVX2 (see [`wide_vectors`]).
-    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    fn radiance_chunk_avx2(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
-        self.radiance_chunk(dirs, out)
     }
 
     /// [`Self::radiance_batch`] on one chunk, on the current thread.
@@ -431,23 +417,84 @@ struct CellBlock {
     inv_jacobian: [f32; QUERY_BLOCK],
 }
 
-/// Whether to run the batch kernels compiled for 256-bit vectors (AVX2, present
-/// on x86-64 CPUs since 2013-2015). The library is built for the x86-64 baseline,
-/// whose vectors (SSE2) hold two f64 where AVX2's hold four; the kernels are
-/// `#[inline(always)]` all the way down so that the wider instructions reach
-/// them. The results are the same either way: the kernels use no fused
+/// The vectors the batch kernels are compiled for, picked at run time. The library
+/// is built for the x86-64 baseline, whose vectors (SSE2) hold two f64; AVX2's
+/// (x86-64 CPUs since 2013-2015) hold four, AVX-512's eight. The kernels are
+/// `#[inline(always)]` all the way down so that the wider instructions reach them.
+/// The results are the same at every width: the kernels use no fused
 /// multiply-add, only operations that round alike at any vector width.
-#[inline]
-fn wide_vectors() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum VectorWidth {
+    Baseline,
+    Avx2,
+    Avx512,
+}
+
+impl VectorWidth {
+    /// The widest vectors the CPU has, or narrower ones where the environment
+    /// variable `ENVLIGHT_VECTOR_WIDTH` asks for them (`baseline` or `avx2`; for
+    /// benchmarks and for checking a result on another path). Decided once per
+    /// process.
+    #[inline]
+    fn detect() -> Self {
+        static WIDTH: std::sync::OnceLock<VectorWidth> = std::sync::OnceLock::new();
+        *WIDTH.get_or_init(|| {
+            let widest = Self::widest();
+            match std::env::var("ENVLIGHT_VECTOR_WIDTH").as_deref() {
+                Ok("baseline") => Self::Baseline,
+                Ok("avx2") => widest.min(Self::Avx2),
+                _ => widest,
+            }
+        })
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
+
+    /// The widest vectors the CPU has.
+    fn widest() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+                && std::arch::is_x86_feature_detected!("avx512dq")
+                && std::arch::is_x86_feature_detected!("avx512bw")
+            {
+                return Self::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return Self::Avx2;
+            }
+        }
+        Self::Baseline
     }
 }
+
+/// A batch kernel compiled for AVX2 and for AVX-512 ([`VectorWidth`]).
+struct WideKernels<L, I, O> {
+    avx2: unsafe fn(&L, &[I], &mut [O]),
+    avx512: unsafe fn(&L, &[I], &mut [O]),
+}
+
+/// For each `name => kernel(I, O)`, a method `name()` returning `kernel` compiled
+/// for AVX2 and for AVX-512 ([`WideKernels`]).
+macro_rules! wide_kernels {
+    ($($name:ident => $kernel:ident($in:ty, $out:ty);)*) => {$(
+        #[doc = concat!("[`Self::", stringify!($kernel), "`] compiled for wider vectors.")]
+        fn $name() -> WideKernels<Self, $in, $out> {
+            #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+            fn avx2(light: &EnvironmentLight, input: &[$in], out: &mut [$out]) {
+                light.$kernel(input, out)
+            }
+            #[cfg_attr(
+                target_arch = "x86_64",
+                target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")
+            )]
+            fn avx512(light: &EnvironmentLight, input: &[$in], out: &mut [$out]) {
+                light.$kernel(input, out)
+            }
+            WideKernels { avx2, avx512 }
+        }
+    )*};
+}
+use wide_kernels;
 
 /// Hands matching chunks of `input` and `out` to `f`, in parallel.
 ///
@@ -469,14 +516,15 @@ fn batch_chunks<I: Sync, O: Send>(input: &[I], out: &mut [O], f: impl Fn(&[I], &
 mod tests {
     use super::*;
     use crate::image::Lookup;
-    use crate::light::{LightOptions, Sampler};
+    use crate::light::{Density, LightOptions, Sampler};
     use crate::math::Rotation;
 
-    /// The batch kernels as built for the baseline target (two f64 lanes), which
-    /// the public batch calls skip on a CPU with AVX2: bit for bit the single
-    /// queries too (tests/threads.rs covers the path the CPU picks).
+    /// The batch kernels at every vector width this CPU runs (the baseline's two
+    /// f64 lanes, AVX2, AVX-512; the public calls pick only the widest): bit for
+    /// bit the single queries, for every density (tests/threads.rs covers the
+    /// public calls too).
     #[test]
-    fn portable_batch_kernels_equal_single_queries() {
+    fn batch_kernels_at_every_width_equal_single_queries() {
         let image = crate::builtin::sky(96, 48);
         let mut dirs: Vec<Vec3> = (0..1_001u64)
             .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(5, k)))
@@ -487,39 +535,118 @@ mod tests {
             Vec3::new(1.0, -1e-7, 0.0),
             Vec3::new(f32::NAN, 0.0, 1.0),
         ]);
-        for (sampler, lookup, mapping) in [
+        let xi: Vec<[f32; 2]> = (0..1_003u64).map(|k| crate::rng::xi_2d(6, k)).collect();
+        let widths: Vec<VectorWidth> = [
+            VectorWidth::Baseline,
+            VectorWidth::Avx2,
+            VectorWidth::Avx512,
+        ]
+        .into_iter()
+        .filter(|&w| w == VectorWidth::Baseline || supports(w))
+        .collect();
+        for (sampler, density, lookup, mapping) in [
             (
                 Sampler::Inversion,
+                Density::PiecewiseConstant,
                 Lookup::Bilinear,
                 Mapping::Equirectangular,
             ),
-            (Sampler::Alias, Lookup::Nearest, Mapping::Equirectangular),
-            (Sampler::Hierarchical, Lookup::Bilinear, Mapping::EqualArea),
+            (
+                Sampler::Alias,
+                Density::PiecewiseConstant,
+                Lookup::Nearest,
+                Mapping::Equirectangular,
+            ),
+            (
+                Sampler::Hierarchical,
+                Density::PiecewiseConstant,
+                Lookup::Bilinear,
+                Mapping::EqualArea,
+            ),
+            (
+                Sampler::Inversion,
+                Density::PiecewiseBilinear,
+                Lookup::Bilinear,
+                Mapping::Equirectangular,
+            ),
+            (
+                Sampler::Inversion,
+                Density::PiecewiseBilinear,
+                Lookup::Nearest,
+                Mapping::EqualArea,
+            ),
         ] {
             let options = LightOptions {
                 sampler,
+                density,
                 lookup,
                 mapping,
                 rotation: Rotation::about_z_degrees(20.0),
                 ..Default::default()
             };
             let light = EnvironmentLight::new(image.clone(), options).unwrap();
-            let mut pdfs = vec![0.0; dirs.len()];
-            light.pdf_chunk(&dirs, &mut pdfs);
-            let mut radiance = vec![[0.0; 3]; dirs.len()];
-            light.radiance_chunk(&dirs, &mut radiance);
-            for (k, &d) in dirs.iter().enumerate() {
-                assert_eq!(
-                    pdfs[k].to_bits(),
-                    light.pdf(d).to_bits(),
-                    "{sampler:?} {d:?}"
-                );
-                assert_eq!(
-                    radiance[k].map(f32::to_bits),
-                    light.radiance(d).map(f32::to_bits),
-                    "{sampler:?} {d:?}"
-                );
+            for &width in &widths {
+                let case = format!("{sampler:?} {density:?} {width:?}");
+                let mut pdfs = vec![0.0; dirs.len()];
+                let mut radiance = vec![[0.0; 3]; dirs.len()];
+                let mut samples = vec![None; xi.len()];
+                // SAFETY: `widths` holds only the widths this CPU supports.
+                unsafe {
+                    match width {
+                        VectorWidth::Baseline => {
+                            light.pdf_chunk(&dirs, &mut pdfs);
+                            light.radiance_chunk(&dirs, &mut radiance);
+                            light.sample_chunk(&xi, &mut samples);
+                        }
+                        VectorWidth::Avx2 => {
+                            (EnvironmentLight::pdf_chunk_wide().avx2)(&light, &dirs, &mut pdfs);
+                            (EnvironmentLight::radiance_chunk_wide().avx2)(
+                                &light,
+                                &dirs,
+                                &mut radiance,
+                            );
+                            (EnvironmentLight::sample_chunk_wide().avx2)(&light, &xi, &mut samples);
+                        }
+                        VectorWidth::Avx512 => {
+                            (EnvironmentLight::pdf_chunk_wide().avx512)(&light, &dirs, &mut pdfs);
+                            (EnvironmentLight::radiance_chunk_wide().avx512)(
+                                &light,
+                                &dirs,
+                                &mut radiance,
+                            );
+                            (EnvironmentLight::sample_chunk_wide().avx512)(
+                                &light,
+                                &xi,
+                                &mut samples,
+                            );
+                        }
+                    }
+                }
+                for (k, &d) in dirs.iter().enumerate() {
+                    assert_eq!(pdfs[k].to_bits(), light.pdf(d).to_bits(), "{case} {d:?}");
+                    assert_eq!(
+                        radiance[k].map(f32::to_bits),
+                        light.radiance(d).map(f32::to_bits),
+                        "{case} {d:?}"
+                    );
+                }
+                for (k, &x) in xi.iter().enumerate() {
+                    assert_eq!(samples[k], light.sample(x), "{case} {x:?}");
+                }
             }
+        }
+    }
+
+    /// Whether this CPU runs kernels compiled for `width`.
+    fn supports(width: VectorWidth) -> bool {
+        match width {
+            VectorWidth::Baseline => true,
+            #[cfg(target_arch = "x86_64")]
+            VectorWidth::Avx2 => std::arch::is_x86_feature_detected!("avx2"),
+            #[cfg(target_arch = "x86_64")]
+            VectorWidth::Avx512 => VectorWidth::widest() == VectorWidth::Avx512,
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
         }
     }
 }
