@@ -18,7 +18,11 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<LightSample>]) {
-        self.run_batch(xi, out, Self::sample_chunk, Self::sample_chunk_wide());
+        // The bilinear density's samples end in vectorized pdfs, which wider vectors
+        // speed up; the others' are scalar code, which measured 5-15% slower when
+        // compiled for them (BENCHMARKS.md, session 8).
+        let wide = matches!(self.planar, Planar::Bilinear(_)).then(Self::sample_chunk_wide);
+        self.run_batch(xi, out, Self::sample_chunk, wide);
     }
 
     /// [`Self::sample_batch`] on one chunk, on the current thread.
@@ -133,25 +137,30 @@ impl EnvironmentLight {
     /// # Panics
     /// When the slices differ in length.
     pub fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
-        self.run_batch(directions, out, Self::pdf_chunk, Self::pdf_chunk_wide());
+        self.run_batch(
+            directions,
+            out,
+            Self::pdf_chunk,
+            Some(Self::pdf_chunk_wide()),
+        );
     }
 
     /// Hands matching chunks of `input` (directions or samples) and `out` to
     /// `kernel`, in parallel, or to the same code compiled for the widest vectors
-    /// the CPU has ([`VectorWidth`]) from `wide`.
+    /// the CPU has ([`VectorWidth`]) from `wide`, when given.
     fn run_batch<I: Sync, O: Send>(
         &self,
         input: &[I],
         out: &mut [O],
         kernel: fn(&Self, &[I], &mut [O]),
-        wide: WideKernels<Self, I, O>,
+        wide: Option<WideKernels<Self, I, O>>,
     ) {
         let width = VectorWidth::detect();
-        batch_chunks(input, out, |input, out| match width {
+        batch_chunks(input, out, |input, out| match (width, &wide) {
             // SAFETY: each wide kernel runs only on a CPU with its features.
-            VectorWidth::Avx512 => unsafe { (wide.avx512)(self, input, out) },
-            VectorWidth::Avx2 => unsafe { (wide.avx2)(self, input, out) },
-            VectorWidth::Baseline => kernel(self, input, out),
+            (VectorWidth::Avx512, Some(wide)) => unsafe { (wide.avx512)(self, input, out) },
+            (VectorWidth::Avx2, Some(wide)) => unsafe { (wide.avx2)(self, input, out) },
+            _ => kernel(self, input, out),
         });
     }
 
@@ -359,7 +368,7 @@ impl EnvironmentLight {
             directions,
             out,
             Self::radiance_chunk,
-            Self::radiance_chunk_wide(),
+            Some(Self::radiance_chunk_wide()),
         );
     }
 
