@@ -19,7 +19,7 @@ mi.set_variant("llvm_ad_rgb")
 dr.set_thread_count(1)
 
 N = 1 << 20
-REPEAT = 7
+REPEAT = 9
 
 
 def synthetic(w, h):
@@ -42,16 +42,21 @@ def synthetic(w, h):
     return rgb
 
 
-def timed(f):
-    times = []
+def timed_together(runs):
+    """Best and worst time of each function in `runs`, over REPEAT rounds that
+    each run every function once, in turn: on a noisy machine all of them see the
+    same load, so their ratios hold."""
+    times = [[] for _ in runs]
     for _ in range(REPEAT):
-        start = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - start)
-    return min(times), max(times)
+        for f, t in zip(runs, times):
+            start = time.perf_counter()
+            f()
+            t.append(time.perf_counter() - start)
+    return [(min(t), max(t)) for t in times]
 
 
 def mitsuba_queries(rgb):
+    """Build time and the (sample, pdf, radiance) callables of Mitsuba's envmap."""
     start = time.perf_counter()
     emitter = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(rgb)})
     build = time.perf_counter() - start
@@ -83,42 +88,57 @@ def mitsuba_queries(rgb):
 
     for f in (run_sample, run_pdf, run_radiance):
         f()  # compile the kernels first
-    return build, timed(run_sample), timed(run_pdf), timed(run_radiance)
+    return build, (run_sample, run_pdf, run_radiance)
 
 
 def envlight_queries(rgb, density):
+    """Build time and the (sample, pdf, radiance) callables of envlight's batch calls."""
     start = time.perf_counter()
     # z-up: the y-up frame would add a copy of the directions in the binding.
     light = envlight.EnvironmentLight.from_array(rgb, density=density)
     build = time.perf_counter() - start
     u = np.random.default_rng(1).random((N, 2), dtype=np.float32)
     d, _, _ = light.sample(u)
-    return (
-        build,
-        timed(lambda: light.sample(u)),
-        timed(lambda: light.pdf(d)),
-        timed(lambda: light.radiance(d)),
-    )
+    return build, (lambda: light.sample(u), lambda: light.pdf(d), lambda: light.radiance(d))
 
 
 def main():
     sizes = [(1024, 512), (2048, 1024), (4096, 2048)]
     if len(sys.argv) > 1:
         sizes = [tuple(int(x) for x in s.split("x")) for s in sys.argv[1:]]
-    print(f"{N} directions per query, one thread each, best of {REPEAT} (spread in brackets); ns per direction")
-    print("| density | map | build ms (mi / ours) | sample | pdf | radiance |")
+    print(
+        f"{N} directions per query, one thread each, best of {REPEAT} rounds that run "
+        "Mitsuba and envlight in turn (spread, worst / best, in brackets); ns per direction"
+    )
+    print("| density | map | build ms (Mitsuba / ours) | sample | pdf | radiance |")
     print("|---|---|---|---|---|---|")
+    densities = ("piecewise-constant", "piecewise-bilinear")
     for w, h in sizes:
         rgb = synthetic(w, h)
-        mi_build, *mi_q = mitsuba_queries(rgb)
-        for density in ("piecewise-constant", "piecewise-bilinear"):
-            ours_build, *ours_q = envlight_queries(rgb, density)
+        _, mi_runs = mitsuba_queries(rgb)
+        ours = [envlight_queries(rgb, density) for density in densities]
+        # The builds again, in turn, for a best-of figure like the queries'.
+        builds = timed_together(
+            [lambda: mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(rgb)})]
+            + [
+                (lambda d=d: envlight.EnvironmentLight.from_array(rgb, density=d))
+                for d in densities
+            ]
+        )
+        mi_build = builds[0][0]
+        # Per query, Mitsuba and both densities in turn, round after round.
+        timings = [
+            timed_together([mi_runs[q]] + [runs[q] for _, runs in ours]) for q in range(3)
+        ]
+        for k, density in enumerate(densities):
             cells = []
-            for (m, m_hi), (o, o_hi) in zip(mi_q, ours_q):
+            for q in range(3):
+                (m, m_hi), (o, o_hi) = timings[q][0], timings[q][1 + k]
                 cells.append(
                     f"{m * 1e9 / N:.1f} / {o * 1e9 / N:.1f} ns = {m / o:.2f}× "
                     f"[{m_hi / m:.2f}, {o_hi / o:.2f}]"
                 )
+            ours_build = builds[1 + k][0]
             print(
                 f"| {density} | {w}×{h} | {mi_build * 1e3:.0f} / {ours_build * 1e3:.0f} = "
                 f"{mi_build / ours_build:.2f}× | " + " | ".join(cells) + " |"
