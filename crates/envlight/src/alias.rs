@@ -88,7 +88,7 @@ impl AliasTable2D {
     /// are more than `u32::MAX` cells.
     pub fn new(f: &[f32], nu: usize) -> Self {
         assert!(
-            nu > 0 && !f.is_empty() && f.len() % nu == 0,
+            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
             "bad 2D grid shape"
         );
         assert!(

@@ -331,14 +331,14 @@ impl BilinearDistribution2D {
     }
 
     /// [`Self::sample_continuous`] for a block of `ξ` (at most
-    /// [`STAGED_BLOCK`](crate::distribution::STAGED_BLOCK)), the patches picked
+    /// [`STAGED_BLOCK`]), the patches picked
     /// with overlapping memory accesses; the same results as one at a time.
     /// `hint` hears each patch's first corner before any point is placed, so a
     /// caller can start fetching what it will read there (such as the texels of
     /// a radiance lookup).
     ///
     /// # Panics
-    /// When the slices differ in length or are longer than `STAGED_BLOCK`.
+    /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
     #[inline(always)]
     pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D], hint: impl Fn([f32; 2])) {
         if self.integral <= 0.0 {

@@ -590,7 +590,7 @@ impl Distribution2D {
     /// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
     pub fn new(f: &[f32], nu: usize) -> Self {
         assert!(
-            nu > 0 && !f.is_empty() && f.len() % nu == 0,
+            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
             "bad 2D grid shape"
         );
         Self::from_rows(nu, f.len() / nu, |v, row| {
@@ -787,8 +787,11 @@ impl Distribution2D {
     }
 
     /// [`Self::sample_continuous_hinted`] for a block of `ξ` (at most
-    /// [`STAGED_BLOCK`]), staged so that the block's cache misses overlap
-    /// ([`Self::staged_block`]); the results are the same as one sample at a time.
+    /// [`STAGED_BLOCK`]) in three passes over the block: the marginal and the
+    /// address of each row's guide entry, then the guide entries and the address
+    /// of each CDF segment, then the scans and placements. Each pass only asks for
+    /// the memory the next one reads, so the block's cache misses overlap instead
+    /// of following each other; the results are the same as one sample at a time.
     ///
     /// # Panics
     /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
@@ -1220,7 +1223,7 @@ mod tests {
     fn envlight_xi(k: u64) -> [f32; 2] {
         let near_one = ONE_MINUS_EPSILON - (k % 7) as f32 * f32::EPSILON;
         let a = crate::rng::xi_2d(3, k);
-        [if k % 2 == 0 { near_one } else { a[0] }, a[1]]
+        [if k.is_multiple_of(2) { near_one } else { a[0] }, a[1]]
     }
 
     #[test]

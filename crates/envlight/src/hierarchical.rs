@@ -110,7 +110,7 @@ impl Hierarchical2D {
     /// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
     pub fn new(f: &[f32], nu: usize) -> Self {
         assert!(
-            nu > 0 && !f.is_empty() && f.len() % nu == 0,
+            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
             "bad 2D grid shape"
         );
         let nv = f.len() / nu;

@@ -122,9 +122,9 @@ pub fn table_reduction(w: usize, h: usize, options: &LightOptions) -> Result<usi
     if table > w {
         return bad(format!("wider than the light's image ({w} texels)"));
     }
-    if w % table != 0 || h % (w / table) != 0 {
+    if !w.is_multiple_of(table) || !h.is_multiple_of(w / table) {
         let fits: Vec<String> = (1..=w.min(64))
-            .filter(|f| w % f == 0 && h % f == 0)
+            .filter(|f| w.is_multiple_of(*f) && h.is_multiple_of(*f))
             .map(|f| (w / f).to_string())
             .collect();
         return bad(format!(
