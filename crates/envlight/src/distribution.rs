@@ -732,6 +732,14 @@ impl Distribution2D {
     /// for four of them otherwise, which the compiler cannot prove redundant.
     #[inline(always)]
     pub(crate) fn cell_pdf_in_grid(&self, iu: usize, iv: usize) -> f32 {
+        let [wu, wv] = self.cell_widths_in_grid(iu, iv);
+        self.pdf_of_widths(wu, wv)
+    }
+
+    /// The CDF widths `[width_u, width_v]` of a cell in the grid, read without
+    /// bounds checks (see [`Self::cell_pdf_in_grid`]).
+    #[inline(always)]
+    fn cell_widths_in_grid(&self, iu: usize, iv: usize) -> [u32; 2] {
         debug_assert!(iu < self.nu && iv < self.nv);
         let marginal = &self.marginal.cdf;
         // The row's CDF entries directly: building the row's view would also
@@ -746,7 +754,7 @@ impl Distribution2D {
                 marginal.get_unchecked(iv + 1) - marginal.get_unchecked(iv),
             )
         };
-        self.pdf_of_widths(wu, wv)
+        [wu, wv]
     }
 
     #[inline(always)]
@@ -860,17 +868,7 @@ impl Distribution2D {
     #[inline(always)]
     pub(crate) fn cell_probability(&self, iu: usize, iv: usize) -> f64 {
         assert!(iu < self.nu && iv < self.nv, "cell outside the grid");
-        let marginal = &self.marginal.cdf;
-        let at = iv * (self.nu + 1) + iu;
-        let cdf = &self.conditional_cdf;
-        // SAFETY: as in `cell_pdf_in_grid`, checked above.
-        let (wu, wv) = unsafe {
-            (
-                cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
-                marginal.get_unchecked(iv + 1) - marginal.get_unchecked(iv),
-            )
-        };
-        probability_of_widths([wu, wv])
+        probability_of_widths(self.cell_widths_in_grid(iu, iv))
     }
 
     /// The `ξ` that [`Self::sample_cell`] maps to cell `cell` with `offset`: the
