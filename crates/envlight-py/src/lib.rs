@@ -375,20 +375,30 @@ impl PyEnvironmentLight {
             ..light_options(sampler, density, mapping, lookup, rotate, scale)?
         };
         let frame = Frame::parse(frame)?;
-        let values: Vec<f32> = match rgb.as_slice() {
-            Ok(s) if rgb.is_c_contiguous() => s.to_vec(),
-            _ => rgb.as_array().iter().copied().collect(),
+        // One copy into the image's texels (and one check of them, in
+        // `EnvImage::new`), without the interpreter lock when the array is
+        // C-contiguous.
+        let texels: Vec<[f32; 3]> = match rgb.as_slice() {
+            Ok(s) if rgb.is_c_contiguous() => py.detach(|| as_arrays::<3>(s).to_vec()),
+            _ => {
+                let values: Vec<f32> = rgb.as_array().iter().copied().collect();
+                as_arrays::<3>(&values).to_vec()
+            }
         };
-        let texels: Vec<[f32; 3]> = as_arrays::<3>(&values).to_vec();
-        if let Some(k) = texels.iter().position(|t| t.iter().any(|c| !c.is_finite())) {
-            return Err(PyValueError::new_err(format!(
-                "rgb: texel ({}, {}) is not finite: {:?}",
-                k % w,
-                k / w,
-                texels[k]
-            )));
-        }
-        let image = EnvImage::new(w, h, texels).map_err(to_py_err)?;
+        let image = py
+            .detach(|| EnvImage::new(w, h, texels))
+            .map_err(|e| match e {
+                envlight::Error::NonFiniteTexel {
+                    pos,
+                    channel,
+                    value,
+                    ..
+                } => PyValueError::new_err(format!(
+                    "rgb: texel ({}, {}) is not finite: {channel} = {value}",
+                    pos.x, pos.y
+                )),
+                e => to_py_err(e),
+            })?;
         py.detach(|| Self::build(image, options, frame))
     }
 
