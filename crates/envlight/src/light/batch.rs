@@ -433,7 +433,7 @@ struct CellBlock {
 /// The results are the same at every width: the kernels use no fused
 /// multiply-add, only operations that round alike at any vector width.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-enum VectorWidth {
+pub(super) enum VectorWidth {
     Baseline,
     Avx2,
     Avx512,
@@ -445,7 +445,7 @@ impl VectorWidth {
     /// benchmarks and for checking a result on another path). Decided once per
     /// process.
     #[inline]
-    fn detect() -> Self {
+    pub(super) fn detect() -> Self {
         static WIDTH: std::sync::OnceLock<VectorWidth> = std::sync::OnceLock::new();
         *WIDTH.get_or_init(|| {
             let widest = Self::widest();

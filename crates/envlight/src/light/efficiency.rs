@@ -1,6 +1,7 @@
 //! [`EnvironmentLight::efficiency`]: the sampling efficiency
 //! `(∫ Y dω)² / ∫ (Y² / p) dω` by Gauss-Legendre quadrature over the image.
 
+use super::batch::VectorWidth;
 use super::build::{importance_row, LuminanceRows};
 use super::{EnvironmentLight, Mapping, Planar};
 use crate::equal_area::EQUAL_AREA_JACOBIAN;
@@ -235,24 +236,9 @@ fn node_row_moments(
     periodic: bool,
 ) -> [f64; 3] {
     let w = blended.len();
+    let bilinear = lookup == Lookup::Bilinear;
     let texel = |left: f32, centre: f32, right: f32, inv_p: f64, inv_q: f64| {
-        let c = centre as f64;
-        let (sum_y, sum_y2) = match lookup {
-            Lookup::Nearest => (4.0 * c, 4.0 * c * c),
-            Lookup::Bilinear => {
-                let (l, r) = (0.5 * (left as f64 + c), 0.5 * (c + right as f64));
-                // The mean of the square of a line from a to b is (a² + ab + b²) / 3.
-                let square = |a: f64, b: f64| a * a + a * b + b * b;
-                (l + 2.0 * c + r, (2.0 / 3.0) * (square(l, c) + square(c, r)))
-            }
-        };
-        // A texel with no light adds nothing, even where a pdf is 0.
-        let lit = sum_y2 > 0.0;
-        [
-            sum_y,
-            if lit { sum_y2 * inv_p } else { 0.0 },
-            if lit { sum_y2 * inv_q } else { 0.0 },
-        ]
+        texel_moments(left, centre, right, inv_p, inv_q, bilinear)
     };
     let (first, last) = (blended[0], blended[w - 1]);
     let (before_first, beyond_last) = if periodic {
@@ -263,19 +249,7 @@ fn node_row_moments(
     if w == 1 {
         return texel(before_first, first, beyond_last, inv_p[0], inv_q[0]);
     }
-    let mut partial = [[0.0f64; 3]; 4];
-    for (k, ((window, &p), &q)) in blended
-        .windows(3)
-        .zip(&inv_p[1..])
-        .zip(&inv_q[1..])
-        .enumerate()
-    {
-        let t = texel(window[0], window[1], window[2], p, q);
-        let sums = &mut partial[k & 3];
-        for m in 0..3 {
-            sums[m] += t[m];
-        }
-    }
+    let interior = interior_moments(&blended[..], inv_p, inv_q, lookup);
     let edges = [
         texel(before_first, first, blended[1], inv_p[0], inv_q[0]),
         texel(
@@ -286,11 +260,110 @@ fn node_row_moments(
             inv_q[w - 1],
         ),
     ];
+    std::array::from_fn(|m| interior[m] + (edges[0][m] + edges[1][m]))
+}
+
+/// Partial sums per lane in [`interior_moments`]: a vector's worth of f64 at the
+/// widest (AVX-512), two at AVX2.
+const LANES: usize = 8;
+
+/// [`node_row_moments`] over the texels between the row's ends (`1..w-1`, for
+/// `w ≥ 2`), in [`LANES`] running sums added up in a fixed order at the end, so
+/// the loop runs in vector lanes and the result does not depend on their width;
+/// compiled for the widest vectors the CPU has.
+fn interior_moments(blended: &[f32], inv_p: &[f64], inv_q: &[f64], lookup: Lookup) -> [f64; 3] {
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
+    fn avx2(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
+        interior_lanes(blended, inv_p, inv_q, bilinear)
+    }
+    #[cfg_attr(
+        target_arch = "x86_64",
+        target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")
+    )]
+    fn avx512(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
+        interior_lanes(blended, inv_p, inv_q, bilinear)
+    }
+    let bilinear = lookup == Lookup::Bilinear;
+    match VectorWidth::detect() {
+        // SAFETY: each wide version runs only on a CPU with its features.
+        VectorWidth::Avx512 => unsafe { avx512(blended, inv_p, inv_q, bilinear) },
+        VectorWidth::Avx2 => unsafe { avx2(blended, inv_p, inv_q, bilinear) },
+        VectorWidth::Baseline => interior_lanes(blended, inv_p, inv_q, bilinear),
+    }
+}
+
+/// The body of [`interior_moments`].
+#[inline(always)]
+fn interior_lanes(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
+    let n = blended.len().saturating_sub(2);
+    let mut sums = [[0.0f64; LANES]; 3];
+    let whole = n / LANES * LANES;
+    for base in (0..whole).step_by(LANES) {
+        // Fixed-size views, so the lane loop has no bounds checks to keep it scalar.
+        let y: &[f32; LANES + 2] = blended[base..base + LANES + 2]
+            .try_into()
+            .expect("in range");
+        let p: &[f64; LANES] = inv_p[base + 1..base + 1 + LANES]
+            .try_into()
+            .expect("in range");
+        let q: &[f64; LANES] = inv_q[base + 1..base + 1 + LANES]
+            .try_into()
+            .expect("in range");
+        for k in 0..LANES {
+            let [sum_y, y2p, y2q] = texel_moments(y[k], y[k + 1], y[k + 2], p[k], q[k], bilinear);
+            sums[0][k] += sum_y;
+            sums[1][k] += y2p;
+            sums[2][k] += y2q;
+        }
+    }
+    for i in whole..n {
+        let k = i - whole;
+        let [sum_y, y2p, y2q] = texel_moments(
+            blended[i],
+            blended[i + 1],
+            blended[i + 2],
+            inv_p[i + 1],
+            inv_q[i + 1],
+            bilinear,
+        );
+        sums[0][k] += sum_y;
+        sums[1][k] += y2p;
+        sums[2][k] += y2q;
+    }
     std::array::from_fn(|m| {
-        (partial[0][m] + partial[1][m])
-            + (partial[2][m] + partial[3][m])
-            + (edges[0][m] + edges[1][m])
+        let s = &sums[m];
+        ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]))
     })
+}
+
+/// One texel's `[Σ y, Σ y²/p, Σ y²/q]` over its four u nodes (see
+/// [`node_row_moments`]), from the blended luminance at its centre and its
+/// neighbours' and the reciprocals of its two densities; no branches.
+#[inline(always)]
+fn texel_moments(
+    left: f32,
+    centre: f32,
+    right: f32,
+    inv_p: f64,
+    inv_q: f64,
+    bilinear: bool,
+) -> [f64; 3] {
+    let c = centre as f64;
+    let (sum_y, sum_y2) = if bilinear {
+        let (l, r) = (0.5 * (left as f64 + c), 0.5 * (c + right as f64));
+        // The mean of the square of a line from a to b is (a² + ab + b²) / 3.
+        let square = |a: f64, b: f64| a * a + a * b + b * b;
+        (l + 2.0 * c + r, (2.0 / 3.0) * (square(l, c) + square(c, r)))
+    } else {
+        (4.0 * c, 4.0 * c * c)
+    };
+    // A texel with no light adds nothing, even where a pdf is 0.
+    let lit = sum_y2 > 0.0;
+    [
+        sum_y,
+        if lit { sum_y2 * inv_p } else { 0.0 },
+        if lit { sum_y2 * inv_q } else { 0.0 },
+    ]
 }
 
 #[cfg(test)]
