@@ -249,7 +249,7 @@ fn node_row_moments(
     if w == 1 {
         return texel(before_first, first, beyond_last, inv_p[0], inv_q[0]);
     }
-    let interior = interior_moments(&blended[..], inv_p, inv_q, lookup);
+    let interior = interior_moments(blended, inv_p, inv_q, lookup);
     let edges = [
         texel(before_first, first, blended[1], inv_p[0], inv_q[0]),
         texel(
