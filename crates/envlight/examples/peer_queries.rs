@@ -4,8 +4,8 @@
 //! per direction for each density. For iterating on the batch kernels between peer
 //! runs; the peer table itself comes from the Python script.
 //!
-//! `RAYON_NUM_THREADS=1 cargo run --release --example peer_queries -- [WIDTH ...]`
-//! (1024 2048 4096 by default).
+//! `RAYON_NUM_THREADS=1 cargo run --release --example peer_queries -- [WIDTH ...]
+//! [DENSITY ...]` (1024 2048 4096 and both densities by default).
 
 #[path = "common/sun_sky.rs"]
 mod sun_sky;
@@ -45,9 +45,11 @@ fn timed_together(runs: &mut [&mut dyn FnMut()]) -> Vec<(f64, f64)> {
 }
 
 fn main() {
-    let mut widths: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|s| s.parse().ok())
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut widths: Vec<usize> = args.iter().filter_map(|s| s.parse().ok()).collect();
+    let only: Vec<&String> = args
+        .iter()
+        .filter(|s| s.parse::<usize>().is_err())
         .collect();
     if widths.is_empty() {
         widths = vec![1024, 2048, 4096];
@@ -58,7 +60,10 @@ fn main() {
     println!("|---|---|---|---|---|---|");
     let mut rng = envlight::rng::SplitMix64::new(1);
     let xi: Vec<[f32; 2]> = (0..N).map(|_| [rng.next_f32(), rng.next_f32()]).collect();
-    let densities = [Density::PiecewiseConstant, Density::PiecewiseBilinear];
+    let densities: Vec<Density> = [Density::PiecewiseConstant, Density::PiecewiseBilinear]
+        .into_iter()
+        .filter(|d| only.is_empty() || only.iter().any(|o| *o == d.name()))
+        .collect();
     for w in widths {
         let image = synthetic(w, w / 2);
         let mut builds = Vec::new();

@@ -4,6 +4,7 @@
 //! kernels compiled for AVX2 where the CPU has it. Bit for bit the single queries.
 
 use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
+use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{cell_indices, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, EQUIRECT_JACOBIAN};
@@ -38,14 +39,14 @@ impl EnvironmentLight {
             Planar::Inversion(d) => self.sample_blocks(
                 xi,
                 out,
-                false,
+                None,
                 #[inline(always)]
                 |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
             ),
             Planar::Alias(d) => self.sample_blocks(
                 xi,
                 out,
-                false,
+                None,
                 #[inline(always)]
                 |xi, out| {
                     one_by_one(
@@ -58,14 +59,14 @@ impl EnvironmentLight {
             Planar::Hierarchical(d) => self.sample_blocks(
                 xi,
                 out,
-                false,
+                None,
                 #[inline(always)]
                 |xi, out| one_by_one(&|x| d.sample_continuous(x), xi, out),
             ),
             Planar::Bilinear(d) => self.sample_blocks(
                 xi,
                 out,
-                true,
+                Some(d),
                 #[inline(always)]
                 |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
             ),
@@ -75,7 +76,8 @@ impl EnvironmentLight {
     /// [`Self::sample_batch`] in two stages per block of samples: all the planar
     /// samples (`planar_block`, which may overlap their memory accesses, see
     /// [`Distribution2D::sample_block`](crate::distribution::Distribution2D::sample_block)),
-    /// then all the directions, pdfs and radiance lookups. A single sample is one
+    /// then all the directions, pdfs and radiance lookups (the pdfs of a
+    /// `continuous` density at the returned directions). A single sample is one
     /// long chain of dependent steps (CDF search, placement, sin/cos, texel loads)
     /// that the CPU cannot overlap with the next; a stage runs a block of
     /// independent short chains, which it can.
@@ -84,15 +86,15 @@ impl EnvironmentLight {
         &self,
         xi: &[[f32; 2]],
         out: &mut [Option<LightSample>],
-        continuous_density: bool,
+        continuous: Option<&BilinearDistribution2D>,
         planar_block: impl Fn(&[[f32; 2]], &mut [Sample2D]) + Sync,
     ) {
         let mut planar = [Sample2D::default(); STAGED_BLOCK];
         for (xi, out) in xi.chunks(STAGED_BLOCK).zip(out.chunks_mut(STAGED_BLOCK)) {
             let planar = &mut planar[..xi.len()];
             planar_block(xi, planar);
-            if continuous_density {
-                self.finish_continuous_block(planar, out);
+            if let Some(d) = continuous {
+                self.finish_continuous_block(d, planar, out);
             } else {
                 for (o, &p) in out.iter_mut().zip(planar.iter()) {
                     *o = self.finish_sample(p, false);
@@ -105,7 +107,12 @@ impl EnvironmentLight {
     /// directions first, then their pdfs together, in vector lanes, as
     /// [`Self::pdf_batch`] computes them (so bit for bit [`Self::pdf`]).
     #[inline(always)]
-    fn finish_continuous_block(&self, planar: &[Sample2D], out: &mut [Option<LightSample>]) {
+    fn finish_continuous_block(
+        &self,
+        d: &BilinearDistribution2D,
+        planar: &[Sample2D],
+        out: &mut [Option<LightSample>],
+    ) {
         let n = planar.len();
         let mut directions = [Vec3::new(0.0, 0.0, 1.0); STAGED_BLOCK];
         let mut jacobians = [0.0f32; STAGED_BLOCK];
@@ -114,7 +121,7 @@ impl EnvironmentLight {
             (*d, *j) = (self.to_world(local), jacobian);
         }
         let mut pdfs = [0.0f32; STAGED_BLOCK];
-        self.pdf_chunk(&directions[..n], &mut pdfs[..n]);
+        self.bilinear_pdfs::<false>(d, &directions[..n], &mut pdfs[..n]);
         for (k, (o, p)) in out.iter_mut().zip(planar).enumerate() {
             let pdf = pdfs[k];
             *o = (p.pdf != 0.0 && jacobians[k] > 0.0 && is_positive_finite(pdf)).then(|| {
@@ -198,33 +205,49 @@ impl EnvironmentLight {
                 |_, _| {},
                 |iu, iv| d.cell_pdf(iu, iv),
             ),
-            Planar::Bilinear(d) => self.uv_blocks(
-                dirs,
-                out,
-                #[inline(always)]
-                |block| {
-                    let mut patches = PatchBlock {
-                        patch: [[0; 2]; QUERY_BLOCK],
-                        point: [[0.0; 2]; QUERY_BLOCK],
-                        inv_jacobian: block.inv_jacobian,
-                    };
-                    for i in 0..QUERY_BLOCK {
-                        let (patch, point) = d.locate([block.u[i], block.v[i]]);
-                        d.prefetch_patch(patch);
-                        (patches.patch[i], patches.point[i]) = (patch, point);
-                    }
-                    patches
-                },
-                #[inline(always)]
-                |patches: &PatchBlock, out| {
-                    let mut planar = [0.0f32; QUERY_BLOCK];
-                    d.pdf_in_patches(&patches.patch, &patches.point, &mut planar);
-                    for (i, o) in out.iter_mut().enumerate() {
-                        *o = solid_angle(planar[i], patches.inv_jacobian[i]);
-                    }
-                },
-            ),
+            Planar::Bilinear(d) => self.bilinear_pdfs::<true>(d, dirs, out),
         }
+    }
+
+    /// [`Self::pdf_chunk`] for the bilinear density `d`: each block's patches
+    /// located (and with `PREFETCH`, their data fetched a block ahead), then their
+    /// densities in vector lanes. Sampling, whose patches are in cache already,
+    /// skips the prefetches.
+    #[inline(always)]
+    fn bilinear_pdfs<const PREFETCH: bool>(
+        &self,
+        d: &BilinearDistribution2D,
+        dirs: &[Vec3],
+        out: &mut [f32],
+    ) {
+        self.uv_blocks(
+            dirs,
+            out,
+            #[inline(always)]
+            |block| {
+                let mut patches = PatchBlock {
+                    patch: [[0; 2]; QUERY_BLOCK],
+                    point: [[0.0; 2]; QUERY_BLOCK],
+                    inv_jacobian: block.inv_jacobian,
+                };
+                for i in 0..QUERY_BLOCK {
+                    let (patch, point) = d.locate([block.u[i], block.v[i]]);
+                    if PREFETCH {
+                        d.prefetch_patch(patch);
+                    }
+                    (patches.patch[i], patches.point[i]) = (patch, point);
+                }
+                patches
+            },
+            #[inline(always)]
+            |patches: &PatchBlock, out| {
+                let mut planar = [0.0f32; QUERY_BLOCK];
+                d.pdf_in_patches(&patches.patch, &patches.point, &mut planar);
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = solid_angle(planar[i], patches.inv_jacobian[i]);
+                }
+            },
+        )
     }
 
     /// The pdf stage of [`Self::pdf_batch`] for a piecewise-constant density over
