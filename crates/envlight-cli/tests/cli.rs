@@ -153,6 +153,60 @@ fn info_json_on_builtin_sky() {
     assert!((z - 35f64.to_radians().sin()).abs() < 0.02, "{z}");
 }
 
+/// `--table-size`: info reports the table and what it costs; a width that does
+/// not divide the map, zero, and the bilinear density are usage errors (exit 2)
+/// naming the option; sampling works with a reduced table.
+#[test]
+fn table_size_is_reported_and_checked() {
+    let v = info_json(&["--table-size", "256"]);
+    assert_eq!(
+        (v["table_width"].as_u64(), v["table_height"].as_u64()),
+        (Some(256), Some(128))
+    );
+    let (own, full) = (
+        v["efficiency"].as_f64().unwrap(),
+        v["full_table_efficiency"].as_f64().unwrap(),
+    );
+    assert!(0.0 < own && own < full && full <= 1.0, "{own} {full}");
+    let plain = info_json(&[]);
+    assert!(plain["full_table_efficiency"].is_null());
+    assert_eq!(plain["table_width"].as_u64(), Some(1024));
+    assert!((plain["efficiency"].as_f64().unwrap() - full).abs() < 1e-6);
+    let text = stdout_of(envlight().args(["info", "--table-size", "512"]));
+    assert!(
+        text.contains("512 x 256 cells") && text.contains("with the full table"),
+        "{text}"
+    );
+    for (args, needle) in [
+        (
+            &["--table-size", "300"][..],
+            "widths that do are 1024, 512, 256",
+        ),
+        (&["--table-size", "0"][..], "--table-size"),
+        (
+            &["--table-size", "256", "--density", "piecewise-bilinear"][..],
+            "--table-size",
+        ),
+    ] {
+        let out = envlight().arg("info").args(args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+    envlight()
+        .args([
+            "sample",
+            "-n",
+            "5",
+            "--table-size",
+            "64",
+            "--sampler",
+            "alias",
+        ])
+        .assert()
+        .success();
+}
+
 #[test]
 fn info_json_on_pfm_and_rotation_moves_the_brightest_direction() {
     let (_dir, map) = pfm_dir();
