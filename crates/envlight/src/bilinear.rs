@@ -302,6 +302,31 @@ impl BilinearDistribution2D {
         }
     }
 
+    /// [`Self::pdf`] at the points `(us[k], v)` of one height, into `out` (as long
+    /// as `us`), located and evaluated in blocks ([`Self::pdf_in_patches`]): bit
+    /// for bit the single calls.
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub(crate) fn pdf_at_height(&self, us: &[f32], v: f32, out: &mut [f32]) {
+        assert_eq!(us.len(), out.len(), "one pdf per point");
+        const BLOCK: usize = 16;
+        let mut patches = [[0usize; 2]; BLOCK];
+        let mut points = [[0.0f64; 2]; BLOCK];
+        let mut pdfs = [0.0f32; BLOCK];
+        for (us, out) in us.chunks(BLOCK).zip(out.chunks_mut(BLOCK)) {
+            for (k, &u) in us.iter().enumerate() {
+                (patches[k], points[k]) = self.locate([u, v]);
+            }
+            // A short last block repeats its first point in the lanes past its end.
+            for k in us.len()..BLOCK {
+                (patches[k], points[k]) = (patches[0], points[0]);
+            }
+            self.pdf_in_patches(&patches, &points, &mut pdfs);
+            out.copy_from_slice(&pdfs[..out.len()]);
+        }
+    }
+
     /// [`Self::pdf`] from what [`Self::locate`] returned.
     #[inline(always)]
     pub(crate) fn pdf_in_patch(&self, [i, k]: [usize; 2], [u, v]: [f64; 2]) -> f32 {

@@ -66,17 +66,26 @@ impl EnvironmentLight {
         // their blocks, so Σ f is its integral times its cell count.
         let [tw, th] = self.table_size();
         let full_scale = (w * h) as f64 / (self.planar.integral() * (tw * th) as f64);
+        // The u of every node along a row, for the bilinear density's pdfs.
+        let node_us: Vec<f32> = if constant_per_texel {
+            Vec::new()
+        } else {
+            (0..w)
+                .flat_map(|i| nodes.map(|tu| ((i as f64 + tu) / w as f64) as f32))
+                .collect()
+        };
         // Rows go to each task in runs of neighbours, so a cache of the last three
         // rows' luminance computes each row's about once instead of three times.
         let init = || {
             (
                 LuminanceRows::new(w),
                 [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]],
+                vec![0.0f32; node_us.len()],
             )
         };
         (0..h)
             .into_par_iter()
-            .map_init(init, |(cache, [above, here, below]), j| {
+            .map_init(init, |(cache, [above, here, below], node_pdfs), j| {
                 let (mut ey, mut ey2p, mut ey2p_full) = (0.0f64, 0.0f64, 0.0f64);
                 // The reciprocal of each texel's (constant) pdf, +∞ where it is 0:
                 // one division per texel instead of one per node. A table reduced
@@ -148,6 +157,10 @@ impl EnvironmentLight {
                         ey2p_full += sum_y2p_full * (dw * dw);
                         continue;
                     }
+                    // The density at every u node of this height, in blocks.
+                    if let Planar::Bilinear(d) = &self.planar {
+                        d.pdf_at_height(&node_us, v as f32, node_pdfs);
+                    }
                     for i in 0..w {
                         let left = if i > 0 {
                             blended[i - 1]
@@ -163,7 +176,7 @@ impl EnvironmentLight {
                         } else {
                             blended[w - 1]
                         };
-                        for &tu in &nodes {
+                        for (n, &tu) in nodes.iter().enumerate() {
                             let y = match lookup {
                                 Lookup::Nearest => blended[i],
                                 Lookup::Bilinear if tu < 0.5 => {
@@ -177,8 +190,7 @@ impl EnvironmentLight {
                             } as f64;
                             ey += y * dw;
                             if y > 0.0 {
-                                let u = ((i as f64 + tu) / w as f64) as f32;
-                                let p_uv = self.planar.pdf([u, v as f32]) as f64;
+                                let p_uv = node_pdfs[4 * i + n] as f64;
                                 ey2p += if p_uv > 0.0 {
                                     y * y * dw * dw / p_uv
                                 } else {

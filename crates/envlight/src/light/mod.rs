@@ -246,7 +246,8 @@ enum Planar {
 }
 
 impl Planar {
-    #[inline(always)]
+    /// The planar density at `uv` (the light's queries inline each sampler's own).
+    #[cfg(test)]
     fn pdf(&self, uv: [f32; 2]) -> f32 {
         match self {
             Planar::Inversion(d) => d.pdf(uv),
