@@ -69,6 +69,7 @@ fn light_options(
     lookup: &str,
     rotate: f32,
     scale: f32,
+    table_width: Option<usize>,
 ) -> PyResult<LightOptions> {
     let sampler = choose("sampler", sampler, &Sampler::ALL, |s| s.name())?;
     let density = choose("density", density, &Density::ALL, |d| d.name())?;
@@ -99,6 +100,7 @@ fn light_options(
         lookup,
         rotation: Rotation::about_z_degrees(rotate),
         scale,
+        table_width,
         ..Default::default()
     })
 }
@@ -331,10 +333,15 @@ impl PyEnvironmentLight {
         frame: &str,
         table_width: Option<usize>,
     ) -> PyResult<Self> {
-        let options = LightOptions {
+        let options = light_options(
+            sampler,
+            density,
+            mapping,
+            lookup,
+            rotate,
+            scale,
             table_width,
-            ..light_options(sampler, density, mapping, lookup, rotate, scale)?
-        };
+        )?;
         let frame = Frame::parse(frame)?;
         let image = py
             .detach(|| load(&path, &LoadOptions::default()))
@@ -370,10 +377,15 @@ impl PyEnvironmentLight {
             )));
         }
         let (h, w) = (shape[0], shape[1]);
-        let options = LightOptions {
+        let options = light_options(
+            sampler,
+            density,
+            mapping,
+            lookup,
+            rotate,
+            scale,
             table_width,
-            ..light_options(sampler, density, mapping, lookup, rotate, scale)?
-        };
+        )?;
         let frame = Frame::parse(frame)?;
         // One copy into the image's texels (and one check of them, in
         // `EnvImage::new`), without the interpreter lock when the array is

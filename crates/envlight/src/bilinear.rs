@@ -69,17 +69,9 @@ const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct BilinearDistribution2D {
-    /// Node positions along u (`mu` of them) and v (`mv`).
-    u_nodes: Vec<f64>,
-    v_nodes: Vec<f64>,
-    /// Lookup guides for the node positions ([`guide`]).
-    u_guide: Vec<u32>,
-    v_guide: Vec<u32>,
-    /// `n` when an axis's nodes are the texel-centre layout `0, (j + ½)/n, 1`
-    /// ([`centred_cells`]), whose patches are found with one multiplication;
-    /// else 0.
-    u_cells: f64,
-    v_cells: f64,
+    /// The node positions along u (`mu` of them) and v (`mv`).
+    u: Axis,
+    v: Axis,
     /// `f[k * mu + i]`, sanitised.
     values: Vec<f32>,
     /// The patches' masses `M_ik` as a piecewise-constant distribution over the
@@ -127,12 +119,9 @@ impl BilinearDistribution2D {
         // f32's range for any node spacing; a positive mass never rounds to 0.
         let patch_count = ((mu - 1) * (mv - 1)) as f64;
         let mass = |i: usize, k: usize| -> f64 {
-            let corners = values[k * mu + i] as f64
-                + values[k * mu + i + 1] as f64
-                + values[(k + 1) * mu + i] as f64
-                + values[(k + 1) * mu + i + 1] as f64;
+            let [a, b, c, d] = corners(&values, mu, i, k);
             let area = (u_nodes[i + 1] - u_nodes[i]) * (v_nodes[k + 1] - v_nodes[k]);
-            area * 0.25 * corners
+            area * 0.25 * (a + b + c + d)
         };
         let (patches, row_sums) = Distribution2D::from_rows_with(
             mu - 1,
@@ -150,12 +139,8 @@ impl BilinearDistribution2D {
         );
         let integral: f64 = row_sums.iter().sum();
         Ok(Self {
-            u_nodes: u_nodes.to_vec(),
-            v_nodes: v_nodes.to_vec(),
-            u_guide: guide(u_nodes),
-            v_guide: guide(v_nodes),
-            u_cells: centred_cells(u_nodes),
-            v_cells: centred_cells(v_nodes),
+            u: Axis::new(u_nodes),
+            v: Axis::new(v_nodes),
             values,
             patches,
             integral,
@@ -165,13 +150,13 @@ impl BilinearDistribution2D {
     /// Node positions along u.
     #[inline]
     pub fn u_nodes(&self) -> &[f64] {
-        &self.u_nodes
+        &self.u.nodes
     }
 
     /// Node positions along v.
     #[inline]
     pub fn v_nodes(&self) -> &[f64] {
-        &self.v_nodes
+        &self.v.nodes
     }
 
     /// The (sanitised) node values, row-major.
@@ -191,43 +176,21 @@ impl BilinearDistribution2D {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.values.as_slice())
             + self.patches.memory_bytes()
-            + std::mem::size_of_val(self.u_nodes.as_slice())
-            + std::mem::size_of_val(self.v_nodes.as_slice())
-            + std::mem::size_of_val(self.u_guide.as_slice())
-            + std::mem::size_of_val(self.v_guide.as_slice())
+            + self.u.memory_bytes()
+            + self.v.memory_bytes()
     }
 
-    /// The patch column holding `u ∈ [0, 1]` ([`patch_of`], in O(1) for evenly
-    /// spread nodes and with one multiplication for texel centres).
+    /// The sides `[u0, u1, v0, v1]` of patch `[i, k]`.
     #[inline(always)]
-    fn patch_u(&self, u: f64) -> usize {
-        locate_patch(&self.u_nodes, &self.u_guide, self.u_cells, u)
-    }
-
-    /// The patch row holding `v ∈ [0, 1]`.
-    #[inline(always)]
-    fn patch_v(&self, v: f64) -> usize {
-        locate_patch(&self.v_nodes, &self.v_guide, self.v_cells, v)
+    fn sides(&self, i: usize, k: usize) -> [f64; 4] {
+        let ([u0, u1], [v0, v1]) = (self.u.side(i), self.v.side(k));
+        [u0, u1, v0, v1]
     }
 
     /// The corners of patch `[i, k]`: `[f_00, f_10, f_01, f_11]` (first index u).
     #[inline(always)]
     fn corners(&self, i: usize, k: usize) -> [f64; 4] {
-        let mu = self.u_nodes.len();
-        assert!(
-            i + 1 < mu && (k + 2) * mu <= self.values.len(),
-            "patch outside the grid"
-        );
-        let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
-        // SAFETY: bottom + 1 = (k + 1) mu + i + 1 < (k + 2) mu <= values.len().
-        unsafe {
-            [
-                *self.values.get_unchecked(top) as f64,
-                *self.values.get_unchecked(top + 1) as f64,
-                *self.values.get_unchecked(bottom) as f64,
-                *self.values.get_unchecked(bottom + 1) as f64,
-            ]
-        }
+        corners(&self.values, self.u.nodes.len(), i, k)
     }
 
     /// The density at `(u, v)` in patch `[i, k]`: `P_ik · B(u, v) / M_ik`, 0 for a
@@ -243,14 +206,7 @@ impl BilinearDistribution2D {
     /// When the patch is outside the grid.
     #[inline(always)]
     fn patch_pdf_given(&self, i: usize, k: usize, u: f64, v: f64, probability: f64) -> f32 {
-        let [a, b, c, d] = self.corners(i, k);
-        let sides = [
-            self.u_nodes[i],
-            self.u_nodes[i + 1],
-            self.v_nodes[k],
-            self.v_nodes[k + 1],
-        ];
-        pdf_from_corners([a, b, c, d], sides, probability, [u, v])
+        pdf_from_corners(self.corners(i, k), self.sides(i, k), probability, [u, v])
     }
 
     /// The patch `[i, k]` holding `uv` (clamped onto the square), and the point as
@@ -260,14 +216,14 @@ impl BilinearDistribution2D {
     #[inline(always)]
     pub(crate) fn locate(&self, uv: [f32; 2]) -> ([usize; 2], [f64; 2]) {
         let (u, v) = (unit_closed(uv[0]), unit_closed(uv[1]));
-        ([self.patch_u(u), self.patch_v(v)], [u, v])
+        ([self.u.patch(u), self.v.patch(v)], [u, v])
     }
 
     /// Starts fetching what [`Self::pdf_in_patch`] of patch `[i, k]` reads: its
     /// two rows of corners and its CDF entries. A hint; harmless for any patch.
     #[inline(always)]
     pub(crate) fn prefetch_patch(&self, [i, k]: [usize; 2]) {
-        let mu = self.u_nodes.len();
+        let mu = self.u.nodes.len();
         let top = k.wrapping_mul(mu).wrapping_add(i);
         prefetch_ptr(self.values.as_ptr().wrapping_add(top));
         prefetch_ptr(self.values.as_ptr().wrapping_add(top.wrapping_add(mu)));
@@ -289,12 +245,7 @@ impl BilinearDistribution2D {
         let mut probability = [0.0f64; N];
         for (j, &[i, k]) in patches.iter().enumerate() {
             corners[j] = self.corners(i, k);
-            sides[j] = [
-                self.u_nodes[i],
-                self.u_nodes[i + 1],
-                self.v_nodes[k],
-                self.v_nodes[k + 1],
-            ];
+            sides[j] = self.sides(i, k);
             probability[j] = self.patches.cell_probability(i, k);
         }
         for j in 0..N {
@@ -380,7 +331,7 @@ impl BilinearDistribution2D {
         for c in cells.iter() {
             self.prefetch_patch(c.cell);
             let [i, k] = c.cell;
-            hint([self.u_nodes[i] as f32, self.v_nodes[k] as f32]);
+            hint([self.u.nodes[i] as f32, self.v.nodes[k] as f32]);
         }
         // The corners, then both coordinates in the patch for all lanes at once
         // (in vector lanes: two square roots and two divisions each), then the
@@ -415,7 +366,7 @@ impl BilinearDistribution2D {
         Sample2D {
             uv,
             pdf: 0.0,
-            cell: [self.patch_u(uv[0] as f64), self.patch_v(uv[1] as f64)],
+            cell: [self.u.patch(uv[0] as f64), self.v.patch(uv[1] as f64)],
         }
     }
 
@@ -434,12 +385,11 @@ impl BilinearDistribution2D {
     #[inline(always)]
     fn point_at(&self, c: CellSample, [x, y]: [f64; 2]) -> Sample2D {
         let [i, k] = c.cell;
-        let u = lerp(x, self.u_nodes[i], self.u_nodes[i + 1]);
-        let v = lerp(y, self.v_nodes[k], self.v_nodes[k + 1]);
+        let [u0, u1, v0, v1] = self.sides(i, k);
         // The pdf is evaluated at the rounded point in the patch `pdf()` finds for
         // it, so the two agree to the bit.
-        let (u, iu) = point_in_patch(&self.u_nodes, i, u, |x| self.patch_u(x));
-        let (v, iv) = point_in_patch(&self.v_nodes, k, v, |x| self.patch_v(x));
+        let (u, iu) = self.u.point_in_patch(i, lerp(x, u0, u1));
+        let (v, iv) = self.v.point_in_patch(k, lerp(y, v0, v1));
         let pdf = if [iu, iv] == c.cell {
             let probability = probability_of_widths(c.widths);
             self.patch_pdf_given(iu, iv, u as f64, v as f64, probability)
@@ -460,10 +410,10 @@ impl BilinearDistribution2D {
         if self.integral <= 0.0 {
             return [u as f32, v as f32];
         }
-        let (i, k) = (self.patch_u(u), self.patch_v(v));
+        let (i, k) = (self.u.patch(u), self.v.patch(v));
         let [a, b, c, d] = self.corners(i, k);
-        let x = local(u, self.u_nodes[i], self.u_nodes[i + 1]);
-        let y = local(v, self.v_nodes[k], self.v_nodes[k + 1]);
+        let [u0, u1, v0, v1] = self.sides(i, k);
+        let (x, y) = (local(u, u0, u1), local(v, v0, v1));
         let r = cdf_linear(y, a + b, c + d);
         let s = cdf_linear(x, lerp(y, a, c), lerp(y, b, d));
         self.patches.invert_cell([i, k], [s, r])
@@ -576,24 +526,89 @@ fn guided_patch(nodes: &[f64], guide: &[u32], x: f64) -> usize {
     lo + nodes[lo + 1..=hi].partition_point(|&n| n <= x)
 }
 
-/// `x` rounded to `f32` below 1 and kept where [`patch_of`] finds patch `i`
-/// (rounding can carry a point on a patch edge into the neighbour), with the patch
-/// [`patch_of`] finds for it: `i`, unless the patch is narrower than an `f32` step.
-#[inline]
-fn point_in_patch(nodes: &[f64], i: usize, x: f64, patch: impl Fn(f64) -> usize) -> (f32, usize) {
-    let last = nodes.len() - 2;
-    let mut y = (x as f32).min(ONE_MINUS_EPSILON);
-    for _ in 0..4 {
-        let yd = y as f64;
-        if i < last && yd >= nodes[i + 1] && y > 0.0 {
-            y = f32::from_bits(y.to_bits() - 1);
-        } else if yd < nodes[i] {
-            y = f32::from_bits(y.to_bits() + 1);
-        } else {
-            return (y, i);
+/// The corners `[f_00, f_10, f_01, f_11]` of patch `[i, k]` of the node values
+/// `values`, `mu` per row.
+///
+/// # Panics
+/// When the patch is outside the grid.
+#[inline(always)]
+fn corners(values: &[f32], mu: usize, i: usize, k: usize) -> [f64; 4] {
+    assert!(
+        i + 1 < mu && (k + 2) * mu <= values.len(),
+        "patch outside the grid"
+    );
+    let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
+    // SAFETY: bottom + 1 = (k + 1) mu + i + 1 < (k + 2) mu <= values.len().
+    unsafe {
+        [
+            *values.get_unchecked(top) as f64,
+            *values.get_unchecked(top + 1) as f64,
+            *values.get_unchecked(bottom) as f64,
+            *values.get_unchecked(bottom + 1) as f64,
+        ]
+    }
+}
+
+/// One axis of the node grid: the node positions, their lookup [`guide`], and
+/// whether they are the texel-centre layout.
+#[derive(Debug, Clone, PartialEq)]
+struct Axis {
+    nodes: Vec<f64>,
+    guide: Vec<u32>,
+    /// `n` when the nodes are the texel-centre layout `0, (j + ½)/n, 1`
+    /// ([`centred_cells`]), whose patches are found with one multiplication;
+    /// else 0.
+    cells: f64,
+}
+
+impl Axis {
+    /// The axis of `nodes` (already checked).
+    fn new(nodes: &[f64]) -> Self {
+        Self {
+            nodes: nodes.to_vec(),
+            guide: guide(nodes),
+            cells: centred_cells(nodes),
         }
     }
-    (y, patch(y as f64))
+
+    /// Bytes held.
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.guide.as_slice())
+    }
+
+    /// The patch holding `x ∈ [0, 1]` ([`locate_patch`]).
+    #[inline(always)]
+    fn patch(&self, x: f64) -> usize {
+        locate_patch(&self.nodes, &self.guide, self.cells, x)
+    }
+
+    /// The ends of patch `i`.
+    #[inline(always)]
+    fn side(&self, i: usize) -> [f64; 2] {
+        [self.nodes[i], self.nodes[i + 1]]
+    }
+
+    /// `x` rounded to `f32` below 1 and kept where [`patch_of`] finds patch `i`
+    /// (rounding can carry a point on a patch edge into the neighbour), with the
+    /// patch [`patch_of`] finds for it: `i`, unless the patch is narrower than an
+    /// `f32` step.
+    #[inline]
+    fn point_in_patch(&self, i: usize, x: f64) -> (f32, usize) {
+        let nodes = &self.nodes;
+        let last = nodes.len() - 2;
+        let mut y = (x as f32).min(ONE_MINUS_EPSILON);
+        for _ in 0..4 {
+            let yd = y as f64;
+            if i < last && yd >= nodes[i + 1] && y > 0.0 {
+                y = f32::from_bits(y.to_bits() - 1);
+            } else if yd < nodes[i] {
+                y = f32::from_bits(y.to_bits() + 1);
+            } else {
+                return (y, i);
+            }
+        }
+        (y, self.patch(y as f64))
+    }
 }
 
 /// `n` when `nodes` are `0, (j + ½)/n for j < n, 1` exactly as written here (the
@@ -718,13 +733,13 @@ mod tests {
     /// over a rectangle is its value at the centre.
     fn rect_probability(d: &BilinearDistribution2D, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
         let (i, k) = (
-            patch_of(&d.u_nodes, 0.5 * (u0 + u1)),
-            patch_of(&d.v_nodes, 0.5 * (v0 + v1)),
+            patch_of(&d.u.nodes, 0.5 * (u0 + u1)),
+            patch_of(&d.v.nodes, 0.5 * (v0 + v1)),
         );
         let (u, v) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
-        let tu = local(u, d.u_nodes[i], d.u_nodes[i + 1]);
-        let tv = local(v, d.v_nodes[k], d.v_nodes[k + 1]);
-        let mu = d.u_nodes.len();
+        let tu = local(u, d.u.nodes[i], d.u.nodes[i + 1]);
+        let tv = local(v, d.v.nodes[k], d.v.nodes[k + 1]);
+        let mu = d.u.nodes.len();
         let at = |kk: usize, ii: usize| d.values[kk * mu + ii] as f64;
         let b = lerp(
             tv,
@@ -745,7 +760,7 @@ mod tests {
             out.push(1.0);
             out
         };
-        let (us, vs) = (halves(&d.u_nodes), halves(&d.v_nodes));
+        let (us, vs) = (halves(&d.u.nodes), halves(&d.v.nodes));
         let mut out = vec![];
         for vw in vs.windows(2) {
             for uw in us.windows(2) {
@@ -762,14 +777,14 @@ mod tests {
         seed: u64,
     ) -> f64 {
         let rects = bins(d);
-        let nbu = 2 * (d.u_nodes.len() - 1);
+        let nbu = 2 * (d.u.nodes.len() - 1);
         let mut counts = vec![0u64; rects.len()];
         for k in 0..n {
             let s = d.sample_continuous(xi_2d(seed, k));
             let (u, v) = (s.uv[0] as f64, s.uv[1] as f64);
             let (i, kk) = (s.cell[0], s.cell[1]);
-            let bu = 2 * i + (u >= 0.5 * (d.u_nodes[i] + d.u_nodes[i + 1])) as usize;
-            let bv = 2 * kk + (v >= 0.5 * (d.v_nodes[kk] + d.v_nodes[kk + 1])) as usize;
+            let bu = 2 * i + (u >= 0.5 * (d.u.nodes[i] + d.u.nodes[i + 1])) as usize;
+            let bv = 2 * kk + (v >= 0.5 * (d.v.nodes[kk] + d.v.nodes[kk + 1])) as usize;
             counts[bv * nbu + bu] += 1;
         }
         let expected: Vec<f64> = rects.iter().map(|&r| expected_of(r) * n as f64).collect();
@@ -918,13 +933,13 @@ mod tests {
             for k in 0..mv - 1 {
                 for i in 0..mu - 1 {
                     let (du, dv) = (
-                        d.u_nodes[i + 1] - d.u_nodes[i],
-                        d.v_nodes[k + 1] - d.v_nodes[k],
+                        d.u.nodes[i + 1] - d.u.nodes[i],
+                        d.v.nodes[k + 1] - d.v.nodes[k],
                     );
                     for &a in &[0.5 - g, 0.5 + g] {
                         for &b in &[0.5 - g, 0.5 + g] {
-                            let u = d.u_nodes[i] + a * du;
-                            let v = d.v_nodes[k] + b * dv;
+                            let u = d.u.nodes[i] + a * du;
+                            let v = d.v.nodes[k] + b * dv;
                             total += d.patch_pdf(i, k, u, v) as f64 * du * dv / 4.0;
                         }
                     }
@@ -952,8 +967,8 @@ mod tests {
                 assert_eq!(d.pdf(s.uv), s.pdf, "{mu}x{mv} {xi:?} {s:?}");
                 assert_eq!(
                     [
-                        patch_of(&d.u_nodes, s.uv[0] as f64),
-                        patch_of(&d.v_nodes, s.uv[1] as f64)
+                        patch_of(&d.u.nodes, s.uv[0] as f64),
+                        patch_of(&d.v.nodes, s.uv[1] as f64)
                     ],
                     s.cell
                 );
@@ -991,15 +1006,15 @@ mod tests {
         let d = random_density(&mut rng, 6, 5);
         let flat = |r: [f64; 4]| {
             let (i, k) = (
-                patch_of(&d.u_nodes, 0.5 * (r[0] + r[1])),
-                patch_of(&d.v_nodes, 0.5 * (r[2] + r[3])),
+                patch_of(&d.u.nodes, 0.5 * (r[0] + r[1])),
+                patch_of(&d.v.nodes, 0.5 * (r[2] + r[3])),
             );
             let patch = rect_probability(
                 &d,
-                d.u_nodes[i],
-                d.u_nodes[i + 1],
-                d.v_nodes[k],
-                d.v_nodes[k + 1],
+                d.u.nodes[i],
+                d.u.nodes[i + 1],
+                d.v.nodes[k],
+                d.v.nodes[k + 1],
             );
             patch / 4.0
         };
@@ -1154,7 +1169,7 @@ mod tests {
             *out.last_mut().unwrap() = 1.0;
             out
         };
-        let (bu, bv) = (cuts(&d.u_nodes), cuts(&d.v_nodes));
+        let (bu, bv) = (cuts(&d.u.nodes), cuts(&d.v.nodes));
         let mut counts = vec![0u64; (bu.len() - 1) * (bv.len() - 1)];
         for uv in &samples {
             let (i, k) = (patch_of(&bu, uv[0] as f64), patch_of(&bv, uv[1] as f64));

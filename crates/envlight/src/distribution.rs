@@ -175,8 +175,14 @@ impl GuidedCdf<'_> {
     fn invert(&self, x: f32) -> f32 {
         let n = self.len();
         let o = cell_index(x, n);
-        let frac = (x as f64 * n as f64 - o as f64).clamp(0.0, 1.0);
-        let t = self.cdf[o] as f64 + frac * self.width(o) as f64;
+        self.xi_at(o, x as f64 * n as f64 - o as f64)
+    }
+
+    /// The `ξ` that lands at offset `frac` (clamped to `[0, 1]`) within cell `o`'s
+    /// CDF segment: `(c[o] + frac · width[o]) / CDF_ONE`.
+    #[inline]
+    fn xi_at(&self, o: usize, frac: f64) -> f32 {
+        let t = self.cdf[o] as f64 + frac.clamp(0.0, 1.0) * self.width(o) as f64;
         ((t / CDF_ONE as f64) as f32).clamp(0.0, 1.0)
     }
 }
@@ -875,13 +881,9 @@ impl Distribution2D {
     /// inverse of the choice, whatever rule placed the point in the cell.
     #[inline]
     pub(crate) fn invert_cell(&self, cell: [usize; 2], offset: [f64; 2]) -> [f32; 2] {
-        let on = |cdf: GuidedCdf<'_>, o: usize, f: f64| {
-            let t = cdf.cdf[o] as f64 + f.clamp(0.0, 1.0) * cdf.width(o) as f64;
-            ((t / CDF_ONE as f64) as f32).clamp(0.0, 1.0)
-        };
         [
-            on(self.row(cell[1]), cell[0], offset[0]),
-            on(self.marginal.view(), cell[1], offset[1]),
+            self.row(cell[1]).xi_at(cell[0], offset[0]),
+            self.marginal.view().xi_at(cell[1], offset[1]),
         ]
     }
 

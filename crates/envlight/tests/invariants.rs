@@ -481,6 +481,19 @@ impl SphereSampler for PdfHalfTexelOff {
     delegate!();
 }
 
+/// The unbiasedness check of the luminance (and its lobes) with 1M samples, the
+/// one the broken samplers below must fail.
+fn luminance_unbiasedness(s: &dyn SphereSampler, seed: u64) -> verify::Unbiasedness {
+    verify::unbiasedness(
+        s,
+        &Integrand::luminance(),
+        &verify::lobe_normals(s),
+        1_000_000,
+        seed,
+        verify::Reference::Checked,
+    )
+}
+
 #[test]
 fn broken_scaled_pdf_is_rejected() {
     // pdf × 1.05: ∫p = 1.05; chi-square (1M samples, α = 1e-3) measured p ≈ 2e-26;
@@ -491,14 +504,7 @@ fn broken_scaled_pdf_is_rejected() {
     };
     let n = verify::normalisation(&s);
     let c = verify::chi_square(&s, 1_000_000, 21, 40_000);
-    let u = verify::unbiasedness(
-        &s,
-        &Integrand::luminance(),
-        &verify::lobe_normals(&s),
-        1_000_000,
-        22,
-        verify::Reference::Checked,
-    );
+    let u = luminance_unbiasedness(&s, 22);
     println!("[{}]\n  {n}\n  {c}\n  {u}", s.name());
     assert!(
         n.verdict(false).is_err() && (n.integral - 1.05).abs() < 1e-3,
@@ -557,14 +563,7 @@ fn broken_unfiltered_importance_is_rejected() {
         inner: light(image, Bilinear),
     };
     let sup = verify::support(&s, &Integrand::luminance());
-    let u = verify::unbiasedness(
-        &s,
-        &Integrand::luminance(),
-        &verify::lobe_normals(&s),
-        1_000_000,
-        25,
-        verify::Reference::Checked,
-    );
+    let u = luminance_unbiasedness(&s, 25);
     println!("[{}]\n  {sup}\n  {u}", s.name());
     assert!(sup.verdict().is_err() && sup.violations > 0, "{sup}");
     let f1 = &u.estimates[0];
@@ -685,14 +684,7 @@ fn broken_equal_area_samplers_are_rejected() {
     };
     let n = verify::normalisation(&s);
     let chi = verify::chi_square(&s, 1_000_000, 30, 40_000);
-    let u = verify::unbiasedness(
-        &s,
-        &Integrand::luminance(),
-        &verify::lobe_normals(&s),
-        1_000_000,
-        31,
-        verify::Reference::Checked,
-    );
+    let u = luminance_unbiasedness(&s, 31);
     println!("[{}]\n  {n}\n  {chi}\n  {u}", s.name());
     assert!(n.verdict(false).is_err(), "{n}");
     assert!(chi.p_value < ALPHA && chi.verdict().is_err(), "{chi}");

@@ -153,6 +153,12 @@ fn build_sampler(
     let (w, h) = (image.width(), image.height());
     let (tw, th) = (w / reduction, h / reduction);
     let mapping = options.mapping;
+    // Image row `j`'s importance into `out`, and its RGB sums.
+    let image_row = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
+        let sums = importance_row(image, options.lookup, mapping, cache, j, out);
+        rows_done(1);
+        sums
+    };
     // Table row `k` from image rows `k r .. (k + 1) r`, each cell the sum of its
     // r × r texels' importance (in f64); with the image rows' RGB sums.
     let init = || (LuminanceRows::new(w), vec![0.0f32; w], vec![0.0f64; tw]);
@@ -160,26 +166,16 @@ fn build_sampler(
                 k: usize,
                 out: &mut [f32]| {
         if reduction == 1 {
-            let sums = importance_row(image, options.lookup, mapping, cache, k, out);
-            rows_done(1);
-            return vec![sums];
+            return vec![image_row(cache, k, out)];
         }
         pooled.fill(0.0);
-        let mut sums = Vec::with_capacity(reduction);
-        for j in k * reduction..(k + 1) * reduction {
-            sums.push(importance_row(
-                image,
-                options.lookup,
-                mapping,
-                cache,
-                j,
-                fine,
-            ));
-            for (p, block) in pooled.iter_mut().zip(fine.chunks_exact(reduction)) {
-                *p += block.iter().map(|&x| x as f64).sum::<f64>();
-            }
-            rows_done(1);
-        }
+        let sums = (k * reduction..(k + 1) * reduction)
+            .map(|j| {
+                let sums = image_row(cache, j, fine);
+                add_blocks(pooled, fine, reduction);
+                sums
+            })
+            .collect();
         for (o, &p) in out.iter_mut().zip(pooled.iter()) {
             *o = positive_weight(p);
         }
@@ -203,9 +199,7 @@ fn build_sampler(
             let mut rows: Vec<&mut [f32]> = values.chunks_mut(w).collect();
             let init = || LuminanceRows::new(w);
             let fill = |cache: &mut LuminanceRows, j: usize, out: &mut [f32]| {
-                let sums = importance_row(image, options.lookup, mapping, cache, j, out);
-                rows_done(1);
-                vec![sums]
+                vec![image_row(cache, j, out)]
             };
             let (_, row_sums) = for_each_row(w, init, fill, &mut rows, |row, out| {
                 out.copy_from_slice(row);
@@ -262,13 +256,18 @@ fn pool(f: &[f32], w: usize, r: usize) -> Vec<f32> {
         .flat_map_iter(|rows| {
             let mut pooled = vec![0.0f64; tw];
             for row in rows.chunks_exact(w) {
-                for (p, block) in pooled.iter_mut().zip(row.chunks_exact(r)) {
-                    *p += block.iter().map(|&x| x as f64).sum::<f64>();
-                }
+                add_blocks(&mut pooled, row, r);
             }
             pooled.into_iter().map(positive_weight)
         })
         .collect()
+}
+
+/// Adds each run of `r` values of `row` (in f64) to its cell of `pooled`.
+fn add_blocks(pooled: &mut [f64], row: &[f32], r: usize) {
+    for (p, block) in pooled.iter_mut().zip(row.chunks_exact(r)) {
+        *p += block.iter().map(|&x| x as f64).sum::<f64>();
+    }
 }
 
 /// MIS compensation of a texel-grid importance `f = Y · J_j`: `max(0, f − Ȳ J_j)`

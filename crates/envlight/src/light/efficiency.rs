@@ -239,8 +239,8 @@ fn efficiency_nodes() -> [f64; 4] {
 ///
 /// Within a texel, y is constant (nearest) or linear on each half (bilinear), and the
 /// four Gauss-Legendre nodes, exact for cubics on each half, sum to closed forms:
-/// `Σ y = 4 mean(y)` and `Σ y² = 4 mean(y²)`. The texels between the edges go
-/// through a loop without branches, with four partial sums.
+/// `Σ y = 4 mean(y)` and `Σ y² = 4 mean(y²)` ([`texel_moments`]). The texels
+/// between the edges go through [`interior_moments`], in vector lanes.
 fn node_row_moments(
     blended: &[f32],
     [inv_p, inv_q]: [&[f64]; 2],
