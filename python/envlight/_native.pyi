@@ -1,5 +1,5 @@
 from os import PathLike
-from typing import Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Literal, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -91,6 +91,27 @@ class EnvironmentLight:
         """The invariant checks (normalisation, pdf consistency, invert, chi-square,
         unbiasedness, support, efficiency) as a list of dicts with keys check, value,
         threshold, samples, result ("pass", "FAIL", "info", "skip")."""
+    def gpu_tables(
+        self, radiance: Literal["f32", "f16"] = "f32"
+    ) -> Dict[str, Union[npt.NDArray[Any], int]]:
+        """The light's flat GPU tables (docs/gpu-tables.md, layout version 1) as
+        numpy arrays, one entry per section present, by name:
+
+        - "params": uint32 (64,), the parameter block (params[24] is the version);
+        - "marginal_cdf": uint32 (table_height + 1,); "marginal_guide": uint32 (G,);
+          "conditional_cdf": uint32 (table_height, table_width + 1);
+          "conditional_guide": uint32 (table_height, 2**bits) (inversion sampler);
+        - "alias_slots": uint32 (n, 2), threshold float32 bits and alias cell;
+          "alias_func": float32 (table_height, table_width) (alias sampler);
+        - "bilinear_values": float32 (H + 2, W + 2) (piecewise-bilinear density);
+        - "radiance": float32 (H, W, 3), or float16 (H, W, 4) with alpha 0 for
+          radiance="f16"; unscaled (the scale is a parameter);
+
+        plus "tables", the uint32 tables buffer a shader binds (sections 2-8 in id
+        order, each padded to 16 bytes; params[49] words), and "version" (1).
+
+        Raises ValueError for the hierarchical sampler (not ported to the GPU), or
+        radiance="f16" with a texel above 65504."""
     @property
     def width(self) -> int: ...
     @property

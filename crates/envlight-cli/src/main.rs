@@ -36,6 +36,7 @@ pub(crate) use conventions;
 
 mod cmd;
 mod csv;
+mod device;
 mod light_args;
 mod output;
 mod progress;
@@ -60,6 +61,8 @@ enum Command {
     Sample(cmd::sample::Args),
     /// Evaluate pdf and radiance for directions read from a CSV file.
     Eval(cmd::eval::Args),
+    /// Write the light's flat GPU tables (docs/gpu-tables.md) to a binary file.
+    Export(cmd::export::Args),
     /// Write a PNG of the tone-mapped map above a heat map of its sampling density.
     Importance(cmd::importance::Args),
     /// Run the sampler's invariant checks on a map and print a pass/fail table.
@@ -69,6 +72,9 @@ enum Command {
     /// Render a preview scene lit by the map (path tracing; several sampling
     /// strategies, side by side with --compare).
     Render(cmd::render::RenderArgs),
+    /// Write the GPU compute shader (sampling, pdf, radiance) in WGSL, GLSL, HLSL,
+    /// MSL or SPIR-V.
+    Shader(cmd::shader::Args),
 }
 
 impl Command {
@@ -77,15 +83,18 @@ impl Command {
             Command::Info(args) => cmd::info::run(args),
             Command::Sample(args) => cmd::sample::run(args),
             Command::Eval(args) => cmd::eval::run(args),
+            Command::Export(args) => cmd::export::run(args),
             Command::Importance(args) => cmd::importance::run(args),
             Command::Verify(args) => cmd::verify::run(args),
             Command::Bench(args) => cmd::bench::run(args),
             Command::Render(args) => cmd::render::run(args).map(|()| cmd::Outcome::Success),
+            Command::Shader(args) => cmd::shader::run(args),
         }
     }
 }
 
 fn main() -> ExitCode {
+    quiet_vulkan_device_select();
     // clap prints its own message and exits with 2 for bad usage, 0 for --help.
     let cli = Cli::parse();
     match cli.command.run() {
@@ -102,6 +111,21 @@ fn main() -> ExitCode {
                 ExitCode::from(1)
             }
         }
+    }
+}
+
+/// Mesa's Vulkan device-select layer (an implicit layer that picks a default GPU)
+/// connects to a Wayland display to do so and, on a machine without one, prints
+/// `error: XDG_RUNTIME_DIR is invalid or not set` to stderr, which reads like
+/// ours. wgpu chooses the adapter itself (WGPU_ADAPTER_NAME), so the layer is
+/// switched off there, unless the user set NODEVICE_SELECT. Done first thing in
+/// `main`, while the process has one thread.
+fn quiet_vulkan_device_select() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none()
+        && std::env::var_os("NODEVICE_SELECT").is_none()
+    {
+        // SAFETY: no other thread exists yet to read the environment concurrently.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }
 }
 

@@ -1589,3 +1589,178 @@ fn a_normal_facing_no_light() {
     assert_eq!(code, 0, "{table}");
     assert!(table.contains("no light faces the surface"), "{table}");
 }
+
+// ---------------------------------------------------------------- export
+
+/// Runs `envlight export ARGS -o FILE` and returns the file's bytes, checked to
+/// read back as GPU tables.
+fn export(args: &[&str], file: &Path) -> (Vec<u8>, envlight::gpu::GpuTables) {
+    let out = envlight()
+        .arg("export")
+        .args(args)
+        .arg("-o")
+        .arg(file)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "export {args:?}: {stderr}");
+    assert!(out.stdout.is_empty(), "export {args:?} wrote to stdout");
+    let bytes = std::fs::read(file).unwrap();
+    let tables = envlight::gpu::GpuTables::from_bytes(&bytes)
+        .unwrap_or_else(|e| panic!("export {args:?}: {e}"));
+    (bytes, tables)
+}
+
+#[test]
+fn export_writes_gpu_tables_of_builtin_sky() {
+    use envlight::gpu::{param, RadianceFormat, MAGIC, VERSION};
+    let dir = TempDir::new().unwrap();
+    let file = dir.path().join("sky.envgpu");
+    let (bytes, tables) = export(&[], &file);
+    assert_eq!(&bytes[..8], &MAGIC);
+    assert_eq!(&bytes[..8], b"ENVLGPU\0");
+    assert_eq!(
+        u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+        VERSION
+    );
+    assert_eq!(tables.to_bytes(), bytes);
+    assert_eq!(tables.radiance_format(), RadianceFormat::F32);
+    let p = tables.params();
+    assert_eq!(p[param::VERSION], 1);
+    assert_eq!((p[param::SAMPLER], p[param::DENSITY]), (0, 0));
+    // The same tables as the library builds for the same light.
+    let light = envlight::EnvironmentLight::new(
+        envlight::builtin::by_name("sky").unwrap(),
+        envlight::LightOptions::default(),
+    )
+    .unwrap();
+    let want = light.gpu_tables(&Default::default()).unwrap();
+    assert_eq!(tables, want);
+    // Light options reach the parameters; a second export replaces the file.
+    let (_, tables) = export(
+        &[
+            "--sampler",
+            "alias",
+            "--mapping",
+            "equal-area",
+            "--rotate",
+            "30",
+            "--scale",
+            "2",
+            "--lookup",
+            "nearest",
+        ],
+        &file,
+    );
+    let p = tables.params();
+    assert_eq!(
+        (p[param::SAMPLER], p[param::MAPPING], p[param::LOOKUP]),
+        (1, 1, 0)
+    );
+    assert_eq!(
+        (p[param::ROTATED], f32::from_bits(p[param::SCALE])),
+        (1, 2.0)
+    );
+    let (_, tables) = export(&["--density", "piecewise-bilinear"], &file);
+    assert_eq!(tables.params()[param::DENSITY], 1);
+}
+
+#[test]
+fn export_f16_radiance_on_builtin_sky_and_a_file() {
+    use envlight::gpu::{param, RadianceFormat};
+    let dir = TempDir::new().unwrap();
+    let f32_file = dir.path().join("f32.envgpu");
+    let f16_file = dir.path().join("f16.envgpu");
+    let (f32_bytes, full) = export(&["--radiance", "f32"], &f32_file);
+    let (f16_bytes, half) = export(&["--radiance", "f16"], &f16_file);
+    assert_eq!(half.radiance_format(), RadianceFormat::F16);
+    assert_eq!(half.params()[param::RADIANCE_FORMAT], 1);
+    assert_eq!(half.tables(), full.tables());
+    // 8 bytes per texel instead of 12.
+    assert_eq!(2 * full.radiance().len(), 3 * half.radiance().len());
+    assert!(f16_bytes.len() < f32_bytes.len());
+    // A small map: its texels round to the f16 the file holds (R, G in the first
+    // word, B and 0 in the second).
+    let (_d, map) = pfm_dir();
+    let (_, half) = export(&[map.to_str().unwrap(), "--radiance", "f16"], &f16_file);
+    assert_eq!(half.radiance().len(), 2 * 16 * 8);
+    // Texel (5, 2) is [40, 30, 20]: exact in f16.
+    let k = 2 * 16 + 5;
+    assert_eq!(half.radiance()[2 * k], 0x5100 | (0x4f80 << 16));
+    assert_eq!(half.radiance()[2 * k + 1], 0x4d00);
+}
+
+#[test]
+fn export_of_the_hierarchical_sampler_is_a_usage_error() {
+    let dir = TempDir::new().unwrap();
+    let file = dir.path().join("never.envgpu");
+    let out = envlight()
+        .args(["export", "--sampler", "hierarchical", "-o"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert!(lines[0].starts_with("error: "), "{stderr}");
+    assert!(lines[0].contains("not ported to the GPU"), "{stderr}");
+    assert!(
+        lines[0].contains("--sampler inversion or alias"),
+        "{stderr}"
+    );
+    assert!(!file.exists());
+    // -o is required: a usage error from clap.
+    let out = envlight().arg("export").output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--output"));
+}
+
+#[test]
+fn export_failures_leave_an_existing_file_untouched() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out.envgpu");
+    std::fs::write(&out, "precious\n").unwrap();
+    assert_error(
+        envlight().args(["export", "missing.exr", "-o"]).arg(&out),
+        "missing.exr",
+    );
+    // A texel beyond f16's range: refused for f16, naming the map and the texel.
+    let bright = dir.path().join("bright.pfm");
+    write_pfm(&bright, 8, 4, |x, y| {
+        if (x, y) == (6, 1) {
+            [1.0, 1e5, 1.0]
+        } else {
+            [1.0; 3]
+        }
+    });
+    let stderr = assert_error(
+        envlight()
+            .arg("export")
+            .arg(&bright)
+            .args(["--radiance", "f16", "-o"])
+            .arg(&out),
+        "bright.pfm",
+    );
+    assert!(
+        stderr.contains("(6, 1)") && stderr.contains("65504") && stderr.contains("f32"),
+        "{stderr}"
+    );
+    let code = envlight()
+        .args(["export", "--sampler", "hierarchical", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap()
+        .status
+        .code();
+    assert_eq!(code, Some(2));
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "precious\n");
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+    // The same map in f32 is fine, and replaces the file.
+    let (bytes, _) = export(&[bright.to_str().unwrap()], &out);
+    assert_eq!(std::fs::read(&out).unwrap(), bytes);
+}

@@ -593,6 +593,90 @@ impl PyEnvironmentLight {
             .collect()
     }
 
+    /// The light's flat GPU tables (docs/gpu-tables.md, layout version 1) as a
+    /// dict of numpy arrays: one entry per section present, by name, plus
+    /// `"tables"` (the contiguous uint32 tables buffer a shader binds, sections
+    /// 2-8 each padded to 16 bytes; `params[49]` words) and `"version"` (1).
+    ///
+    /// Sections: `params` uint32 (64,); `marginal_cdf` uint32 (table_height + 1,);
+    /// `marginal_guide` uint32 (G,); `conditional_cdf` uint32 (table_height,
+    /// table_width + 1); `conditional_guide` uint32 (table_height, 2**bits);
+    /// `alias_slots` uint32 (n, 2) (threshold's float32 bits, alias cell);
+    /// `alias_func` float32 (table_height, table_width); `bilinear_values`
+    /// float32 (H + 2, W + 2); `radiance` float32 (H, W, 3) for `radiance="f32"`
+    /// or float16 (H, W, 4), alpha 0, for `radiance="f16"` (unscaled: the scale
+    /// is `params[36]`).
+    ///
+    /// Raises ValueError for the hierarchical sampler (not ported to the GPU),
+    /// an unknown `radiance`, or `"f16"` with a texel above 65504.
+    #[pyo3(signature = (radiance="f32"))]
+    fn gpu_tables<'py>(&self, py: Python<'py>, radiance: &str) -> PyResult<Bound<'py, PyDict>> {
+        use envlight::gpu::{param, section, GpuTableOptions, RadianceFormat};
+        let format = match radiance {
+            "f32" => RadianceFormat::F32,
+            "f16" => RadianceFormat::F16,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "radiance must be \"f32\" or \"f16\", not {radiance:?}"
+                )))
+            }
+        };
+        let tables = py
+            .detach(|| self.light.gpu_tables(&GpuTableOptions { radiance: format }))
+            .map_err(to_py_err)?;
+        let p = tables.params();
+        let (tw, th) = (
+            p[param::TABLE_WIDTH] as usize,
+            p[param::TABLE_HEIGHT] as usize,
+        );
+        let (w, h) = (
+            p[param::IMAGE_WIDTH] as usize,
+            p[param::IMAGE_HEIGHT] as usize,
+        );
+        let floats =
+            |words: &[u32]| -> Vec<f32> { words.iter().map(|&x| f32::from_bits(x)).collect() };
+        let out = PyDict::new(py);
+        out.set_item("version", envlight::gpu::VERSION)?;
+        out.set_item("tables", PyArray1::from_slice(py, tables.tables()))?;
+        for s in tables.sections() {
+            let words = tables.section_words(s.id).unwrap_or(&[]);
+            let n = words.len();
+            let array = match s.id {
+                section::ALIAS_FUNC => PyArray1::from_vec(py, floats(words))
+                    .reshape(vec![th, tw])?
+                    .into_any(),
+                section::BILINEAR_VALUES => PyArray1::from_vec(py, floats(words))
+                    .reshape(vec![h + 2, w + 2])?
+                    .into_any(),
+                section::RADIANCE if format == RadianceFormat::F32 => {
+                    PyArray1::from_vec(py, floats(words))
+                        .reshape(vec![h, w, 3])?
+                        .into_any()
+                }
+                section::RADIANCE => {
+                    let halves: Vec<u16> = words
+                        .iter()
+                        .flat_map(|&x| [x as u16, (x >> 16) as u16])
+                        .collect();
+                    PyArray1::from_vec(py, halves)
+                        .reshape(vec![h, w, 4])?
+                        .call_method1("view", ("float16",))?
+                }
+                _ => {
+                    let shape = match s.id {
+                        section::CONDITIONAL_CDF => vec![th, tw + 1],
+                        section::CONDITIONAL_GUIDE => vec![th, n / th.max(1)],
+                        section::ALIAS_SLOTS => vec![n / 2, 2],
+                        _ => vec![n],
+                    };
+                    PyArray1::from_slice(py, words).reshape(shape)?.into_any()
+                }
+            };
+            out.set_item(s.name, array)?;
+        }
+        Ok(out)
+    }
+
     /// Width of the light's image in texels.
     #[getter]
     fn width(&self) -> usize {

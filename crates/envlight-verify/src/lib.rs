@@ -29,9 +29,19 @@
 //! Determinism: every check draws `ξ` from PCG streams fixed by the seed and the
 //! chunk index, and sums partial results in chunk order, so results do not depend
 //! on the number of threads.
+//!
+//! Batches: the checks ask a sampler for samples, pdfs and radiance only through
+//! its batch methods ([`SphereSampler::sample_batch`], `pdf_batch`,
+//! `radiance_batch`), one call per chunk of samples ([`over_sample_chunks`]), per
+//! row of quadrature points or per set of probes, so a sampler whose single calls
+//! are expensive (a GPU dispatch each) costs a few dispatches per check; only
+//! `invert` is asked point by point. The batch results must equal the single
+//! calls', so the figures are those of the single calls.
 
 #![warn(missing_docs)]
 
+#[cfg(test)]
+mod batch_self_checks;
 mod checks;
 mod integrand;
 pub mod maps;
@@ -61,7 +71,7 @@ pub use product::AtShadingPoint;
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
-pub use stats::{fits, over_points, over_samples, Moments};
+pub use stats::{fits, over_points, over_sample_chunks, over_samples, Moments};
 pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report, CHECKS};
 
 /// Significance level of every chi-square test: a correct sampler is rejected with

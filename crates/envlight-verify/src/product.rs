@@ -1,7 +1,7 @@
 //! A product sampler at one shading point, as a [`SphereSampler`] (DESIGN.md §6a).
 
 use crate::integrand::Integrand;
-use crate::sampler::{Grid, SphereSample, SphereSampler};
+use crate::sampler::{sphere_sample, Grid, SphereSample, SphereSampler};
 use envlight::{EnvironmentLight, Factor, ProductSampler, ShadingPoint, Vec3};
 
 /// [`ProductSampler`] conditioned on one [`Factor`]: what the checks see of a
@@ -64,11 +64,17 @@ impl SphereSampler for AtShadingPoint<'_> {
         )
     }
     fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        self.point.sample(xi).map(|s| SphereSample {
-            direction: s.direction,
-            pdf: s.pdf,
-            radiance: s.radiance,
-        })
+        self.point.sample(xi).map(sphere_sample)
+    }
+    fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<SphereSample>]) {
+        // `ProductSampler::sample_batch` is `sampler.at(factor).sample(ξ)` per
+        // point, the very code of `self.point`: the same results, in parallel.
+        let factors = vec![self.factor; xi.len()];
+        let mut samples = vec![None; xi.len()];
+        self.sampler.sample_batch(&factors, xi, &mut samples);
+        for (o, s) in out.iter_mut().zip(samples) {
+            *o = s.map(sphere_sample);
+        }
     }
     fn pdf(&self, direction: Vec3) -> f32 {
         self.point.pdf(direction)
@@ -84,6 +90,11 @@ impl SphereSampler for AtShadingPoint<'_> {
     }
     fn grid(&self) -> Option<Grid> {
         SphereSampler::grid(self.light())
+    }
+    fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
+        // As `sample_batch`: `sampler.at(factor).pdf(ω)` per direction.
+        let factors = vec![self.factor; directions.len()];
+        self.sampler.pdf_batch(&factors, directions, out)
     }
     fn radiance_batch(&self, directions: &[Vec3], out: &mut [[f32; 3]]) {
         self.light().radiance_batch(directions, out)

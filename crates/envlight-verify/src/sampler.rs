@@ -1,7 +1,7 @@
 //! What the harness checks: a sampler of directions and its cell grid.
 
 use crate::param::Param;
-use envlight::{EnvironmentLight, Rotation, Vec3};
+use envlight::{EnvironmentLight, LightSample, Rotation, Vec3};
 
 /// One direction drawn by a sampler.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,6 +92,16 @@ pub trait SphereSampler: Sync {
     fn reported_efficiency(&self) -> Option<f64> {
         None
     }
+    /// [`Self::sample`] of every `ξ`, written to `out` (as long as `xi`) in order.
+    /// The checks draw their samples through this, one call per chunk of `ξ`
+    /// ([`over_sample_chunks`](crate::over_sample_chunks)); a sampler with a
+    /// faster batch query (a GPU dispatch, vector lanes) overrides it, and its
+    /// results must equal the single calls', bit for bit.
+    fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<SphereSample>]) {
+        for (o, &x) in out.iter_mut().zip(xi) {
+            *o = self.sample(x);
+        }
+    }
     /// [`Self::pdf`] of every direction; a sampler with a faster batch query
     /// overrides this (its results must equal the single calls').
     fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
@@ -104,6 +114,15 @@ pub trait SphereSampler: Sync {
         for (o, &d) in out.iter_mut().zip(directions) {
             *o = self.radiance(d);
         }
+    }
+}
+
+/// The harness's view of a light's sample (without its image point).
+pub(crate) fn sphere_sample(s: LightSample) -> SphereSample {
+    SphereSample {
+        direction: s.direction,
+        pdf: s.pdf,
+        radiance: s.radiance,
     }
 }
 
@@ -127,11 +146,16 @@ impl SphereSampler for EnvironmentLight {
         )
     }
     fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        EnvironmentLight::sample(self, xi).map(|s| SphereSample {
-            direction: s.direction,
-            pdf: s.pdf,
-            radiance: s.radiance,
-        })
+        EnvironmentLight::sample(self, xi).map(sphere_sample)
+    }
+    fn sample_batch(&self, xi: &[[f32; 2]], out: &mut [Option<SphereSample>]) {
+        // The light's batch sampler is bit for bit its single samples (its own
+        // tests and tests/threads.rs check that, for every sampler and density).
+        let mut samples = vec![None; xi.len()];
+        EnvironmentLight::sample_batch(self, xi, &mut samples);
+        for (o, s) in out.iter_mut().zip(samples) {
+            *o = s.map(sphere_sample);
+        }
     }
     fn pdf(&self, direction: Vec3) -> f32 {
         EnvironmentLight::pdf(self, direction)

@@ -154,6 +154,24 @@ impl AliasTable2D {
         &self.func
     }
 
+    /// The slots as `(threshold, alias)`, slot `i` keeping cell `i` when the test's
+    /// fraction is below `threshold · 2⁴⁸` (for [`crate::gpu`]'s export).
+    pub(crate) fn slots(&self) -> impl ExactSizeIterator<Item = (f32, u32)> + '_ {
+        self.slots.iter().map(|s| (s.threshold, s.alias))
+    }
+
+    /// `1 / I`, or 0 for a zero function.
+    #[inline]
+    pub(crate) fn inv_integral(&self) -> f64 {
+        self.inv_integral
+    }
+
+    /// Bits of the leftover fraction that place the point along u.
+    #[inline]
+    pub(crate) fn offset_bits(&self) -> u32 {
+        self.offset_bits
+    }
+
     /// Bytes of sampling data held (function and table).
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.func.as_slice()) + std::mem::size_of_val(self.slots.as_slice())

@@ -171,6 +171,20 @@ impl BilinearDistribution2D {
         self.integral
     }
 
+    /// The piecewise-constant distribution over the patches' masses that picks
+    /// the patch (for [`crate::gpu`]'s export).
+    #[inline]
+    pub(crate) fn patches(&self) -> &Distribution2D {
+        &self.patches
+    }
+
+    /// `[w, h]` when both axes are the texel-centre layout `0, (j + ½)/n, 1` of a
+    /// `w × h` image (the layout the light builds), else `None`.
+    pub(crate) fn texel_centre_cells(&self) -> Option<[usize; 2]> {
+        let (w, h) = (self.u.cells, self.v.cells);
+        (w > 0.0 && h > 0.0).then_some([w as usize, h as usize])
+    }
+
     /// Bytes of sampling data held (values, the patch distribution and the node
     /// positions with their guides).
     pub fn memory_bytes(&self) -> usize {

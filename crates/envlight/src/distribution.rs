@@ -485,6 +485,13 @@ impl Distribution1D {
         4 * (self.cdf.len() + self.guide.len())
     }
 
+    /// The guide table: `1 << guide_bits(n)` entries, entry `k` the last cell `o`
+    /// with `cdf[o] <= k · 2³² / len` (for [`crate::gpu`]'s export).
+    #[inline]
+    pub(crate) fn guide(&self) -> &[u32] {
+        &self.guide
+    }
+
     /// Density at `x ∈ [0, 1]`: `n · width[⌊x n⌋] / CDF_ONE`, or 0 for a zero
     /// function.
     #[inline]
@@ -700,6 +707,26 @@ impl Distribution2D {
     pub fn memory_bytes(&self) -> usize {
         4 * (self.conditional_cdf.len() + self.conditional_guide.len())
             + self.marginal.memory_bytes()
+    }
+
+    /// Every row's conditional CDF, row `v` at `[v (nu + 1) .. (v + 1) (nu + 1)]`
+    /// (for [`crate::gpu`]'s export).
+    #[inline]
+    pub(crate) fn conditional_cdfs(&self) -> &[u32] {
+        &self.conditional_cdf
+    }
+
+    /// Every row's guide table, row `v` at `[v << bits .. (v + 1) << bits]` with
+    /// `bits` = [`Self::row_guide_bits`] (for [`crate::gpu`]'s export).
+    #[inline]
+    pub(crate) fn conditional_guides(&self) -> &[u32] {
+        &self.conditional_guide
+    }
+
+    /// log₂ of the entries of each row's guide table.
+    #[inline]
+    pub(crate) fn row_guide_bits(&self) -> u32 {
+        self.row_guide_bits
     }
 
     #[inline(always)]

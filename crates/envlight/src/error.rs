@@ -88,6 +88,23 @@ pub enum Error {
     /// An option given to a builder is out of range (a NaN scale, say).
     #[error("invalid option: {0}")]
     InvalidOption(String),
+    /// A combination of options that a feature does not implement (the hierarchical
+    /// sampler exported for a GPU, say).
+    #[error("not supported: {0}")]
+    Unsupported(String),
+    /// A texel channel too large for a 16-bit float: it would round to infinity.
+    #[error(
+        "texel {pos} has {channel} = {value}, beyond the largest 16-bit float (65504); \
+         export the radiance as f32"
+    )]
+    HalfOverflow {
+        /// The first such texel in reading order (rows from the top).
+        pos: TexelPos,
+        /// The channel, `R`, `G` or `B`.
+        channel: char,
+        /// The offending value.
+        value: f32,
+    },
 }
 
 /// Shorthand for results in this crate.

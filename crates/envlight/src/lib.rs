@@ -36,6 +36,7 @@ pub mod color;
 pub mod distribution;
 pub mod equal_area;
 pub mod error;
+pub mod gpu;
 pub mod hierarchical;
 pub mod image;
 pub mod light;

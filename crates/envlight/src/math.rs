@@ -756,6 +756,12 @@ impl Rotation {
         Self { m }
     }
 
+    /// The matrix rows: applying the rotation is `d'[i] = rows[i] · d`.
+    #[inline]
+    pub fn rows(&self) -> [[f32; 3]; 3] {
+        self.m
+    }
+
     /// The inverse rotation (the transpose).
     pub fn inverse(self) -> Self {
         let m = self.m;

@@ -10,6 +10,7 @@ use envlight::{EnvironmentLight, Vec3};
 use serde_json::json;
 
 use super::Outcome;
+use crate::device::DeviceArgs;
 use crate::light_args::LightArgs;
 use crate::output::Output;
 
@@ -30,12 +31,24 @@ Builds start from the map as read, with the light options given (for --mapping \
 equal-area from a lat-long map, the resampling is part of build_ms).\n\n\
 With --json, one object with exactly the keys width, height (of the map as read), threads, load_ms, \
 build_ms, build_ms_1thread, floor_ms, sample_ns, pdf_ns, radiance_ns, \
-batch_samples_per_s, bytes_per_texel (all numbers).\n\n",
+batch_samples_per_s, bytes_per_texel (all numbers).\n\n\
+With --device gpu the queries run on the GPU instead, --queries at a time (the library's \
+WGSL module through wgpu), and the figures are per pass, fastest of --repeat: for \
+sample (ξ uploaded), sample_seeded (ξ drawn on the device), pdf and radiance, the \
+upload, kernel and read-back times in ms and the rate of the kernel alone and of the \
+whole round trip. With --json: device, adapter, backend, device_type, driver, width, \
+height, queries, tables_ms (building the flat tables on the CPU), setup_ms (uploading \
+them and compiling the pipelines), device_bytes, and per query an object with upload_ms, \
+kernel_ms, readback_ms, kernel_per_s, round_trip_per_s. A software device (lavapipe) \
+measures nothing about GPUs.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
     #[command(flatten)]
     light: LightArgs,
+
+    #[command(flatten)]
+    device: DeviceArgs,
 
     /// Print one JSON object instead of the readable table.
     #[arg(long)]
@@ -61,6 +74,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let image = &input_image;
     let loaded = args.light.build(input)?;
     let light = &loaded.light;
+    if args.device.is_gpu() {
+        return run_gpu(args, light, image.width(), image.height());
+    }
     let options = *light.options();
     let texels = image.width() * image.height();
     let light_image = light.image();
@@ -226,6 +242,151 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             ratio(build_ms_1thread, floor_ms),
             loaded.build_ms,
             batch_samples_per_s / 1e6,
+        )
+    };
+    out.write_all(text.as_bytes())?;
+    out.finish()?;
+    Ok(Outcome::Success)
+}
+
+/// One query's fastest pass on the GPU.
+#[derive(Debug, Clone, Copy)]
+struct GpuPass {
+    timings: envlight_gpu::Timings,
+    rows: usize,
+}
+
+impl GpuPass {
+    fn fastest(
+        repeat: u32,
+        mut pass: impl FnMut() -> anyhow::Result<envlight_gpu::Timings>,
+        rows: usize,
+    ) -> anyhow::Result<Self> {
+        let mut best: Option<envlight_gpu::Timings> = None;
+        for _ in 0..repeat {
+            let t = pass()?;
+            let total = |t: &envlight_gpu::Timings| t.upload + t.kernel + t.readback;
+            if best.as_ref().is_none_or(|b| total(&t) < total(b)) {
+                best = Some(t);
+            }
+        }
+        Ok(Self {
+            timings: best.unwrap_or_default(),
+            rows,
+        })
+    }
+
+    fn per_s(&self, seconds: f64) -> f64 {
+        if seconds > 0.0 {
+            self.rows as f64 / seconds
+        } else {
+            f64::NAN
+        }
+    }
+
+    fn kernel_per_s(&self) -> f64 {
+        self.per_s(self.timings.kernel)
+    }
+
+    fn round_trip_per_s(&self) -> f64 {
+        let t = self.timings;
+        self.per_s(t.upload + t.kernel + t.readback)
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let t = self.timings;
+        json!({
+            "upload_ms": t.upload * 1e3,
+            "kernel_ms": t.kernel * 1e3,
+            "readback_ms": t.readback * 1e3,
+            "kernel_per_s": self.kernel_per_s(),
+            "round_trip_per_s": self.round_trip_per_s(),
+        })
+    }
+
+    fn line(&self, name: &str) -> String {
+        let t = self.timings;
+        format!(
+            "{name:<17} upload {:>8.2} ms  kernel {:>8.2} ms  read-back {:>8.2} ms  \
+             {:>8.2} M/s kernel, {:>8.2} M/s round trip\n",
+            t.upload * 1e3,
+            t.kernel * 1e3,
+            t.readback * 1e3,
+            self.kernel_per_s() / 1e6,
+            self.round_trip_per_s() / 1e6
+        )
+    }
+}
+
+/// `bench --device gpu`: the GPU's passes over `--queries` rows.
+fn run_gpu(
+    args: &Args,
+    light: &EnvironmentLight,
+    width: usize,
+    height: usize,
+) -> anyhow::Result<Outcome> {
+    let started = Instant::now();
+    let tables = crate::device::gpu_tables(light)?;
+    let tables_ms = started.elapsed().as_secs_f64() * 1e3;
+    let device = envlight_gpu::GpuDevice::new()?;
+    let started = Instant::now();
+    let gpu = envlight_gpu::GpuLight::from_tables(&device, &tables, envlight_gpu::shader::WGSL)?;
+    let setup_ms = started.elapsed().as_secs_f64() * 1e3;
+    let n = args.queries as usize;
+    let xi: Vec<[f32; 2]> = (0..n as u64)
+        .map(|k| envlight::rng::xi_2d(0xbe7c, k))
+        .collect();
+    let dirs: Vec<[f32; 3]> = xi
+        .iter()
+        .map(|&x| envlight::math::uniform_sphere(x).to_array())
+        .collect();
+    let r = args.repeat;
+    let sample = GpuPass::fastest(r, || Ok(gpu.sample_timed(&xi)?.1), n)?;
+    let seeded = GpuPass::fastest(r, || Ok(gpu.sample_seeded_timed(0xbe7c, 0, n)?.1), n)?;
+    let pdf = GpuPass::fastest(r, || Ok(gpu.pdf_timed(&dirs)?.1), n)?;
+    let radiance = GpuPass::fastest(r, || Ok(gpu.radiance_timed(&dirs)?.1), n)?;
+    let adapter = device.report();
+    let mut out = Output::create(None)?;
+    let text = if args.json {
+        let value = json!({
+            "device": "gpu",
+            "adapter": adapter.name,
+            "backend": adapter.backend,
+            "device_type": adapter.device_type,
+            "driver": adapter.driver,
+            "width": width,
+            "height": height,
+            "queries": n,
+            "tables_ms": tables_ms,
+            "setup_ms": setup_ms,
+            "device_bytes": gpu.device_bytes(),
+            "sample": sample.json(),
+            "sample_seeded": seeded.json(),
+            "pdf": pdf.json(),
+            "radiance": radiance.json(),
+        });
+        format!("{value}\n")
+    } else {
+        let software = if adapter.device_type == "cpu" {
+            " (a software device: these figures say nothing about GPUs)"
+        } else {
+            ""
+        };
+        format!(
+            "map               {width} x {height}\n\
+             adapter           {} ({}, {}){software}\n\
+             tables            {tables_ms:>10.1} ms   (flat tables built on the CPU)\n\
+             setup             {setup_ms:>10.1} ms   (upload and pipeline compilation)\n\
+             device memory     {:>10.1} MiB\n\
+             passes of {n} rows, fastest of {r}:\n{}{}{}{}",
+            adapter.name,
+            adapter.backend,
+            adapter.device_type,
+            gpu.device_bytes() as f64 / (1 << 20) as f64,
+            sample.line("sample"),
+            seeded.line("sample, seeded"),
+            pdf.line("pdf"),
+            radiance.line("radiance"),
         )
     };
     out.write_all(text.as_bytes())?;

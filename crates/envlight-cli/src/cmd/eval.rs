@@ -7,11 +7,12 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context};
-use envlight::{EnvironmentLight, Vec3};
+use envlight::Vec3;
 use rayon::prelude::*;
 
 use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
+use crate::device::DeviceArgs;
 use crate::light_args::LightArgs;
 use crate::output::{open_input, write_bytes, Output};
 use crate::progress::Progress;
@@ -35,7 +36,8 @@ Output: CSV with the header line exactly `x,y,z,pdf,r,g,b`, then one row per inp
 in order: the normalised world-space direction, the solid-angle pdf (sr⁻¹) with which \
 `envlight sample` draws it (with --normal, the product sampler's pdf for that surface \
 normal), and the radiance arriving from it. A bad row stops the \
-command with an error naming its line; with -o no output file is left behind.\n\n",
+command with an error naming its line; with -o no output file is left behind. With \
+--device gpu the pdf and radiance are computed on the GPU.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
@@ -44,6 +46,9 @@ pub struct Args {
 
     #[command(flatten)]
     normal: NormalArgs,
+
+    #[command(flatten)]
+    device: DeviceArgs,
 
     /// CSV file of directions, or - for stdin.
     #[arg(long, value_name = "FILE|-")]
@@ -77,6 +82,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let light = &loaded.light;
     let product = product_sampler(light, args.normal.normal);
     let density = Density::new(light, product.as_ref(), args.normal.normal);
+    let gpu = args.device.open(light, args.normal.normal)?;
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 
@@ -97,14 +103,32 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             next_line_number += 1;
         }
         progress.inc(batch.len() as u64);
-        let results: Vec<Result<Vec<u8>, anyhow::Error>> = (0..batch.len())
-            .into_par_iter()
-            .step_by(TASK_LINES)
-            .map(|first| {
-                let last = (first + TASK_LINES).min(batch.len());
-                eval_lines(light, &density, &columns, &batch, first..last, &source)
-            })
-            .collect();
+        let tasks = (0..batch.len()).into_par_iter().step_by(TASK_LINES);
+        let range = |first: usize| first..(first + TASK_LINES).min(batch.len());
+        let results: Vec<anyhow::Result<Vec<u8>>> = match &gpu {
+            None => tasks
+                .map(|first| {
+                    let directions = parse_lines(&columns, &batch, range(first), &source)?;
+                    let rows = directions
+                        .iter()
+                        .map(|&d| (d, density.pdf(d), light.radiance(d)));
+                    Ok(format_rows(rows))
+                })
+                .collect(),
+            Some(gpu) => {
+                let parsed: anyhow::Result<Vec<Vec<Vec3>>> = tasks
+                    .map(|first| parse_lines(&columns, &batch, range(first), &source))
+                    .collect();
+                let directions: Vec<Vec3> = parsed?.concat();
+                let arrays: Vec<[f32; 3]> = directions.iter().map(|d| d.to_array()).collect();
+                let evals = gpu.eval(&arrays)?;
+                let rows = directions
+                    .iter()
+                    .zip(&evals)
+                    .map(|(&d, e)| (d, e.pdf, e.radiance));
+                vec![Ok(format_rows(rows))]
+            }
+        };
         for result in results {
             write_bytes(&mut out, &result?)?;
         }
@@ -208,17 +232,15 @@ fn field(raw: &str) -> &str {
         .map_or(t, str::trim)
 }
 
-/// Evaluates lines `range` of `batch` into output rows; the first bad line is an error.
-fn eval_lines(
-    light: &EnvironmentLight,
-    density: &Density,
+/// The directions of lines `range` of `batch` (blank lines skipped); the first
+/// bad line is an error naming it.
+fn parse_lines(
     columns: &Columns,
     batch: &Batch,
     range: std::ops::Range<usize>,
     source: &str,
-) -> anyhow::Result<Vec<u8>> {
-    let mut buf = Vec::with_capacity(range.len() * MAX_ROW_BYTES);
-    let mut fmt = ryu::Buffer::new();
+) -> anyhow::Result<Vec<Vec3>> {
+    let mut directions = Vec::with_capacity(range.len());
     let mut fields: Vec<&str> = Vec::with_capacity(columns.needed);
     for index in range {
         let line_number = batch.first_line_number + index as u64;
@@ -233,15 +255,19 @@ fn eval_lines(
         fields.extend(text.split(',').take(columns.needed));
         let d = parse_direction(&fields, columns)
             .map_err(|message| anyhow!("{source}:{line_number}: {message}"))?;
-        push_row(
-            &mut buf,
-            &mut fmt,
-            d.to_array(),
-            density.pdf(d),
-            light.radiance(d),
-        );
+        directions.push(d);
     }
-    Ok(buf)
+    Ok(directions)
+}
+
+/// The output rows for `(direction, pdf, radiance)` triples.
+fn format_rows(rows: impl ExactSizeIterator<Item = (Vec3, f32, [f32; 3])>) -> Vec<u8> {
+    let mut buf = Vec::with_capacity(rows.len() * MAX_ROW_BYTES);
+    let mut fmt = ryu::Buffer::new();
+    for (d, pdf, radiance) in rows {
+        push_row(&mut buf, &mut fmt, d.to_array(), pdf, radiance);
+    }
+    buf
 }
 
 /// How far from 1 a length may be for the direction to count as normalised: a few

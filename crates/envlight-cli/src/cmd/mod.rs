@@ -4,10 +4,12 @@
 
 pub mod bench;
 pub mod eval;
+pub mod export;
 pub mod importance;
 pub mod info;
 pub mod render;
 pub mod sample;
+pub mod shader;
 pub mod verify;
 
 /// How a subcommand that did not hit an error ended.

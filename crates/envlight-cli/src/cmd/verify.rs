@@ -11,6 +11,7 @@ use envlight_verify::{
 };
 
 use super::Outcome;
+use crate::device::DeviceArgs;
 use crate::light_args::LightArgs;
 use crate::output::Output;
 use crate::progress::Progress;
@@ -42,6 +43,9 @@ corners.\n\
 With --normal the checks run on the product sampler for that surface normal, against \
 its integrand Y·max(0, n·ω) instead of Y (the `unbiased` rows name it), and `invert` is \
 skipped (it has no inverse).\n\n\
+With --device gpu every sample, pdf and radiance the checks see is computed on the GPU \
+(the light's cell grid and its claimed ∫Y dω come from the tables); `invert` is \
+skipped (a CPU query).\n\n\
 An all-black map has nothing to check, nor a normal that no light faces: the checks are \
 skipped.\n\n",
     crate::conventions!()
@@ -52,6 +56,9 @@ pub struct Args {
 
     #[command(flatten)]
     normal: NormalArgs,
+
+    #[command(flatten)]
+    device: DeviceArgs,
 
     /// Number of sample directions (for each sampling check).
     #[arg(long, value_name = "N", default_value_t = 200_000,
@@ -72,6 +79,11 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let loaded = args.light.load()?;
     let light = &loaded.light;
     let n = args.samples as usize;
+    let gpu = args.device.open(light, args.normal.normal)?;
+    let on_gpu = gpu
+        .as_ref()
+        .zip(SphereSampler::grid(light.as_ref()))
+        .map(|(g, grid)| envlight_gpu::GpuSphereSampler::new(g, grid));
     let product = product_sampler(light, args.normal.normal);
     let at = product
         .as_ref()
@@ -95,9 +107,11 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             reference: Reference::Midpoint,
             ..Config::with_samples(n, args.seed)
         };
-        let (sampler, integrand, name): (&dyn SphereSampler, Integrand, &str) = match &at {
-            Some(a) => (a, a.integrand(), "product"),
-            None => (
+        let (sampler, integrand, name): (&dyn SphereSampler, Integrand, &str) = match (&at, &on_gpu)
+        {
+            (Some(a), _) => (a, a.integrand(), "product"),
+            (None, Some(g)) => (g, Integrand::luminance(), "gpu"),
+            (None, None) => (
                 light.as_ref(),
                 Integrand::luminance(),
                 light.options().sampler.name(),
@@ -109,6 +123,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             progress.inc(1);
         });
         progress.finish();
+        if let Some(e) = on_gpu.as_ref().and_then(|g| g.error()) {
+            anyhow::bail!("{}: the GPU failed while verifying: {e}", loaded.name);
+        }
         report.rows(name)
     };
 

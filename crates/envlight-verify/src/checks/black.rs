@@ -2,7 +2,7 @@
 
 use crate::quadrature::{Needs, Quadrature};
 use crate::sampler::SphereSampler;
-use crate::stats::{finite_rgb, over_samples};
+use crate::stats::{finite_rgb, over_sample_chunks};
 use std::fmt;
 
 /// What a sampler of an all-black light does.
@@ -52,11 +52,12 @@ impl fmt::Display for Black {
 
 /// Samples and probes an all-black sampler.
 pub fn black(s: &dyn SphereSampler, n: usize, seed: u64) -> Black {
-    let some = over_samples(
+    let some = over_sample_chunks(
+        s,
         n,
         seed,
         || 0usize,
-        |c, xi| *c += s.sample(xi).is_some() as usize,
+        |c, _, samples| *c += samples.iter().filter(|smp| smp.is_some()).count(),
     )
     .iter()
     .sum();

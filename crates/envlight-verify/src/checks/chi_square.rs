@@ -4,7 +4,7 @@ use crate::param::Frame;
 use crate::quadrature::{Needs, Quadrature};
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;
-use crate::stats::{fits, over_samples};
+use crate::stats::{fits, over_sample_chunks};
 use crate::{ALPHA, EDGE_BAND};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::fmt;
@@ -162,12 +162,17 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
 
     // Observed counts.
     let fine_of = |uv: [f64; 2]| frame.param.cell(uv, [fine_u, fine_v]);
-    let (observed, none, nudged) = over_samples(
+    let (observed, none, nudged) = over_sample_chunks(
+        s,
         n,
         seed,
         || (vec![0u32; bins_u * bins_v], 0usize, 0usize),
-        |(hist, none, nudged), xi| match s.sample(xi) {
-            Some(smp) => {
+        |(hist, none, nudged), _, samples| {
+            for smp in samples {
+                let Some(smp) = smp else {
+                    *none += 1;
+                    continue;
+                };
                 let uv = frame.local_uv(smp.direction);
                 let mut cell = fine_of(uv);
                 if cells[cell][0] == 0.0 {
@@ -185,7 +190,6 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
                 }
                 hist[bin_of_fine(cell % fine_u, cell / fine_u)] += 1;
             }
-            None => *none += 1,
         },
     )
     .into_iter()

@@ -2,9 +2,10 @@
 
 use crate::param::{place, Frame, Place};
 use crate::report::{Row, Verdict};
-use crate::sampler::{Grid, SphereSampler};
-use crate::stats::{finite_rgb, fits, over_samples};
+use crate::sampler::{Grid, SphereSample, SphereSampler};
+use crate::stats::{finite_rgb, fits, over_sample_chunks};
 use crate::{EDGE_BAND, INVERT_TOLERANCE};
+use envlight::Vec3;
 use std::fmt;
 
 /// `pdf(sample(ξ).ω)` against `sample(ξ).pdf`, and `invert(sample(ξ).ω)` against `ξ`.
@@ -176,16 +177,22 @@ fn worse(a: Option<(f64, String)>, b: Option<(f64, String)>) -> Option<(f64, Str
     }
 }
 
-/// Draws `n` samples and checks each against `pdf()` (to the relative `tolerance`
-/// away from the poles, normally [`crate::PDF_CONSISTENCY_TOLERANCE`]) and `invert()`.
-pub fn consistency(s: &dyn SphereSampler, n: usize, seed: u64, tolerance: f64) -> Consistency {
-    let grid = s.grid();
-    let frame = Frame::of(s);
-    let mut c = over_samples(n, seed, Consistency::default, |c, xi| {
-        c.samples += 1;
-        let Some(smp) = s.sample(xi) else {
-            c.none += 1;
-            return;
+/// What [`consistency`] makes of one sample before its `pdf()` is known.
+#[derive(Clone, Copy)]
+enum Class<'a> {
+    /// `sample` returned `None`.
+    None,
+    Malformed(&'a SphereSample),
+    NearEdge,
+    NearPole,
+    /// Checked against `pdf()` and `invert()`.
+    Interior(&'a SphereSample),
+}
+
+impl<'a> Class<'a> {
+    fn of(smp: &'a Option<SphereSample>, grid: Option<Grid>, frame: &Frame) -> Self {
+        let Some(smp) = smp else {
+            return Class::None;
         };
         let len = smp.direction.length();
         if !(smp.pdf.is_finite()
@@ -193,27 +200,91 @@ pub fn consistency(s: &dyn SphereSampler, n: usize, seed: u64, tolerance: f64) -
             && (len - 1.0).abs() < 1e-5
             && finite_rgb(smp.radiance))
         {
-            c.malformed += 1;
-            let w = Some((f64::INFINITY, format!("malformed sample for ξ={xi:?}: {smp:?}")));
-            c.worst = worse(c.worst.take(), w);
-            return;
+            return Class::Malformed(smp);
         }
-        match place(grid, &frame, smp.direction) {
-            Place::NearEdge => {
-                c.near_edge += 1;
-                return;
-            }
-            Place::NearPole => {
-                c.near_pole += 1;
-                return;
-            }
-            Place::Interior => {}
+        match place(grid, frame, smp.direction) {
+            Place::NearEdge => Class::NearEdge,
+            Place::NearPole => Class::NearPole,
+            Place::Interior => Class::Interior(smp),
         }
+    }
+}
+
+/// Draws `n` samples and checks each against `pdf()` (to the relative `tolerance`
+/// away from the poles, normally [`crate::PDF_CONSISTENCY_TOLERANCE`]) and `invert()`.
+/// Per chunk of samples it makes one [`SphereSampler::sample_batch`] and one
+/// [`SphereSampler::pdf_batch`] call (over the directions that are checked);
+/// `invert()` is asked sample by sample.
+pub fn consistency(s: &dyn SphereSampler, n: usize, seed: u64, tolerance: f64) -> Consistency {
+    let grid = s.grid();
+    let frame = Frame::of(s);
+    let mut c = over_sample_chunks(s, n, seed, Consistency::default, |c, xi, samples| {
+        // Classify the chunk's samples, look up the pdfs of those to be checked in
+        // one batch, then go through the samples in order.
+        let classes: Vec<Class> = samples
+            .iter()
+            .map(|smp| Class::of(smp, grid, &frame))
+            .collect();
+        let directions: Vec<Vec3> = classes
+            .iter()
+            .filter_map(|class| match class {
+                Class::Interior(smp) => Some(smp.direction),
+                _ => None,
+            })
+            .collect();
+        let mut pdfs = vec![0.0f32; directions.len()];
+        if !directions.is_empty() {
+            s.pdf_batch(&directions, &mut pdfs);
+        }
+        let mut pdfs = pdfs.into_iter();
+        for (&xi, class) in xi.iter().zip(classes) {
+            c.samples += 1;
+            match class {
+                Class::None => c.none += 1,
+                Class::Malformed(smp) => {
+                    c.malformed += 1;
+                    let w = Some((
+                        f64::INFINITY,
+                        format!("malformed sample for ξ={xi:?}: {smp:?}"),
+                    ));
+                    c.worst = worse(c.worst.take(), w);
+                }
+                Class::NearEdge => c.near_edge += 1,
+                Class::NearPole => c.near_pole += 1,
+                Class::Interior(smp) => {
+                    let p = pdfs.next().expect("one pdf per checked sample");
+                    c.check(s, &frame, tolerance, xi, smp, p);
+                }
+            }
+        }
+    })
+    .into_iter()
+    .fold(Consistency::default(), Consistency::merge);
+    c.max_exempt_fraction = Consistency::max_exempt_fraction(grid);
+    c.tolerance = tolerance;
+    c
+}
+
+impl Consistency {
+    /// Checks one sample `smp`, drawn for `xi`, off the edges and poles, against
+    /// `p`, its `pdf()`, and against `invert()`.
+    fn check(
+        &mut self,
+        s: &dyn SphereSampler,
+        frame: &Frame,
+        tolerance: f64,
+        xi: [f32; 2],
+        smp: &SphereSample,
+        p: f32,
+    ) {
+        let c = self;
         c.checked += 1;
-        let p = s.pdf(smp.direction) as f64;
+        let p = p as f64;
         let rel = (p - smp.pdf as f64).abs() / smp.pdf as f64;
         let rel = if rel.is_nan() { f64::INFINITY } else { rel };
-        let tolerance = frame.param.pdf_tolerance(tolerance, frame.local_uv(smp.direction));
+        let tolerance = frame
+            .param
+            .pdf_tolerance(tolerance, frame.local_uv(smp.direction));
         if !fits(rel, tolerance) {
             c.pdf_failures += 1;
         }
@@ -250,10 +321,5 @@ pub fn consistency(s: &dyn SphereSampler, n: usize, seed: u64, tolerance: f64) -
         }
         c.max_pdf_error = c.max_pdf_error.max(rel);
         c.max_invert_error = c.max_invert_error.max(inv_err);
-    })
-    .into_iter()
-    .fold(Consistency::default(), Consistency::merge);
-    c.max_exempt_fraction = Consistency::max_exempt_fraction(grid);
-    c.tolerance = tolerance;
-    c
+    }
 }

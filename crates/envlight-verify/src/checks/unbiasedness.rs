@@ -5,7 +5,7 @@ use crate::param::Frame;
 use crate::quadrature::{Needs, Point, Quadrature};
 use crate::report::{sig, Row, Verdict};
 use crate::sampler::SphereSampler;
-use crate::stats::{fits, over_samples, Moments};
+use crate::stats::{fits, over_sample_chunks, Moments};
 use crate::{QUADRATURE_SLACK, Z_TOLERANCE};
 use envlight::color::luminance;
 use envlight::Vec3;
@@ -242,10 +242,16 @@ pub fn lobe_normals(s: &dyn SphereSampler) -> Vec<Vec3> {
     let best = (0..h)
         .into_par_iter()
         .map(|j| {
+            // One batch query per row of cell centres.
+            let v = (j as f64 + 0.5) / h as f64;
+            let directions: Vec<Vec3> = (0..w)
+                .map(|i| frame.world_at((i as f64 + 0.5) / w as f64, v))
+                .collect();
+            let mut radiance = vec![[0.0f32; 3]; w];
+            s.radiance_batch(&directions, &mut radiance);
             let mut best = (f32::NEG_INFINITY, up);
-            for i in 0..w {
-                let d = frame.world_at((i as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64);
-                let y = luminance(s.radiance(d));
+            for (&d, &l) in directions.iter().zip(&radiance) {
+                let y = luminance(l);
                 if y > best.0 {
                     best = (y, d);
                 }
@@ -407,21 +413,24 @@ pub fn unbiasedness(
         quadrature(&q2, false)
     });
 
-    let (moments, bad_weights) = over_samples(
+    let (moments, bad_weights) = over_sample_chunks(
+        s,
         n,
         seed,
         || ([Moments::default(); K], 0usize),
-        |(acc, bad), xi| {
-            let mut v = [0.0f64; K];
-            if let Some(smp) = s.sample(xi) {
-                let w = integrand.value(smp.radiance, smp.direction) / smp.pdf as f64;
-                if !w.is_finite() {
-                    *bad += 1;
+        |(acc, bad), _, samples| {
+            for smp in samples {
+                let mut v = [0.0f64; K];
+                if let Some(smp) = smp {
+                    let w = integrand.value(smp.radiance, smp.direction) / smp.pdf as f64;
+                    if !w.is_finite() {
+                        *bad += 1;
+                    }
+                    v = values(w, smp.direction);
                 }
-                v = values(w, smp.direction);
-            }
-            for (a, x) in acc.iter_mut().zip(&v[..m]) {
-                a.push(*x);
+                for (a, x) in acc.iter_mut().zip(&v[..m]) {
+                    a.push(*x);
+                }
             }
         },
     )

@@ -238,7 +238,7 @@ pub struct LightSample {
 
 /// The 2D sampler over `[0, 1]²` behind a light.
 #[derive(Debug, Clone)]
-enum Planar {
+pub(crate) enum Planar {
     Inversion(Distribution2D),
     Alias(AliasTable2D),
     Hierarchical(Hierarchical2D),
@@ -358,6 +358,11 @@ impl EnvironmentLight {
     /// Bytes of sampling data (excluding the image).
     pub fn sampling_bytes(&self) -> usize {
         self.planar.memory_bytes()
+    }
+
+    /// The 2D sampler behind the light (for [`crate::gpu`]'s export).
+    pub(crate) fn planar(&self) -> &Planar {
+        &self.planar
     }
 
     #[inline]

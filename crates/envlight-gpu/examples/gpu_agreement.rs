@@ -1,0 +1,84 @@
+//! How the GPU's rows agree with the CPU's, for a map and the light options of
+//! each ported combination: `cargo run --release -p envlight-gpu --example
+//! gpu_agreement [MAP] [ROWS]` (default builtin sky, 65536 rows). With
+//! `ENVLIGHT_SHOW_DISAGREEMENTS=N` it also prints the first N rows that disagree.
+
+use envlight::light::{Density, Mapping, Sampler};
+use envlight::{EnvironmentLight, LightOptions, Lookup};
+use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Row};
+use envlight_gpu::{GpuDevice, GpuLight};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let image = match args.next() {
+        Some(path) if path != "builtin:sky" => {
+            envlight::load::load(path.as_ref(), &Default::default())?.image
+        }
+        _ => envlight::builtin::sky(1024, 512),
+    };
+    let rows: usize = args.next().map_or(Ok(65536), |n| n.parse())?;
+    let show: usize = std::env::var("ENVLIGHT_SHOW_DISAGREEMENTS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let device = GpuDevice::new()?;
+    let r = device.report();
+    println!("adapter: {} ({}, {})", r.name, r.backend, r.device_type);
+    let directions: Vec<[f32; 3]> = (0..rows as u64)
+        .map(|k| envlight::math::uniform_sphere(envlight::rng::xi_2d(1, k)).to_array())
+        .collect();
+    for (sampler, density) in [
+        (Sampler::Inversion, Density::PiecewiseConstant),
+        (Sampler::Alias, Density::PiecewiseConstant),
+        (Sampler::Inversion, Density::PiecewiseBilinear),
+    ] {
+        for mapping in Mapping::ALL {
+            for lookup in [Lookup::Bilinear, Lookup::Nearest] {
+                let options = LightOptions {
+                    sampler,
+                    density,
+                    mapping,
+                    lookup,
+                    ..Default::default()
+                };
+                let light = EnvironmentLight::new(image.clone(), options)?;
+                let gpu = GpuLight::new(&device, &light)?;
+                let cpu_rows = cpu_sample_rows(&light, 0, 0, rows);
+                let gpu_rows: Vec<Row> = gpu
+                    .sample_seeded(0, 0, rows)?
+                    .iter()
+                    .map(|s| s.row())
+                    .collect();
+                let s = compare(&cpu_rows, &gpu_rows);
+                let evals: Vec<Row> = gpu
+                    .eval(&directions)?
+                    .iter()
+                    .zip(&directions)
+                    .map(|(e, &d)| e.row(d))
+                    .collect();
+                let e = compare(&cpu_eval_rows(&light, &directions), &evals);
+                println!(
+                    "{} {} {} {lookup:?}\n  sample: {s}\n  eval:   {e}",
+                    sampler.name(),
+                    density.name(),
+                    mapping.name()
+                );
+                let mut shown = 0;
+                for (k, (c, g)) in cpu_rows.iter().zip(&gpu_rows).enumerate() {
+                    if shown >= show {
+                        break;
+                    }
+                    if compare(&[*c], &[*g]).agreeing == 0 {
+                        shown += 1;
+                        let uv_c = light.direction_to_uv(envlight::Vec3::from(c.direction));
+                        let uv_g = light.direction_to_uv(envlight::Vec3::from(g.direction));
+                        println!(
+                            "    row {k}: cpu {c:?} uv {uv_c:?}\n           gpu {g:?} uv {uv_g:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}

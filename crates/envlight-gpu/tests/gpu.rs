@@ -1,0 +1,408 @@
+//! The GPU light against the CPU light, row by row, on a real device (Mesa's
+//! lavapipe in CI), for every ported combination of sampler, density, mapping and
+//! lookup; the library's invariant harness on GPU output; and the rejection of
+//! deliberately broken shaders by both.
+//!
+//! Without an adapter the tests print one line naming the package to install and
+//! pass, unless `ENVLIGHT_REQUIRE_GPU` is set (CI sets it): then they fail.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use envlight::gpu::GpuTableOptions;
+use envlight::light::{Density, Mapping, Sampler};
+use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation};
+use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Agreement, Row};
+use envlight_gpu::{shader, GpuDevice, GpuLight, GpuSphereSampler};
+use envlight_verify::{maps, Config, Integrand, SphereSampler};
+
+/// Rows per agreement case.
+const ROWS: usize = 20_000;
+/// The seed of every agreement case.
+const SEED: u64 = 0x6e41;
+
+/// The shared device, or `None` (after printing why) where there is none.
+fn device() -> Option<&'static GpuDevice> {
+    static DEVICE: OnceLock<Option<GpuDevice>> = OnceLock::new();
+    DEVICE
+        .get_or_init(|| match GpuDevice::new() {
+            Ok(d) => {
+                let r = d.report();
+                println!("GPU adapter: {} ({}, {})", r.name, r.backend, r.device_type);
+                Some(d)
+            }
+            Err(e) => {
+                assert!(
+                    std::env::var_os("ENVLIGHT_REQUIRE_GPU").is_none(),
+                    "ENVLIGHT_REQUIRE_GPU is set but there is no GPU: {e}"
+                );
+                println!("skipping GPU tests: {e}");
+                None
+            }
+        })
+        .as_ref()
+}
+
+/// A sun-and-sky map: a smooth sky and a 3×2-texel sun, asymmetric in u and v.
+fn sun_sky(w: usize, h: usize) -> EnvImage {
+    EnvImage::from_fn(w, h, |x, y| {
+        let u = (x as f32 + 0.5) / w as f32;
+        let v = (y as f32 + 0.5) / h as f32;
+        let sky = [0.3 + 0.5 * (1.0 - v), 0.5 + 0.4 * u, 1.0 - 0.5 * v];
+        if (x == w / 3 || x == w / 3 + 1 || x == w / 3 + 2) && (y == h / 4 || y == h / 4 + 1) {
+            [5000.0, 4500.0, 4000.0]
+        } else if v > 0.5 {
+            [0.05 * sky[0], 0.05 * sky[1], 0.05 * sky[2]]
+        } else {
+            sky
+        }
+    })
+    .unwrap()
+}
+
+fn options(sampler: Sampler, density: Density, mapping: Mapping, lookup: Lookup) -> LightOptions {
+    LightOptions {
+        sampler,
+        density,
+        mapping,
+        lookup,
+        ..Default::default()
+    }
+}
+
+/// Every ported combination: (sampler, density) × mapping × lookup.
+fn ported() -> Vec<(String, LightOptions)> {
+    let mut out = Vec::new();
+    for (sampler, density) in [
+        (Sampler::Inversion, Density::PiecewiseConstant),
+        (Sampler::Alias, Density::PiecewiseConstant),
+        (Sampler::Inversion, Density::PiecewiseBilinear),
+    ] {
+        for mapping in Mapping::ALL {
+            for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+                let name = format!(
+                    "{} {} {} {lookup:?}",
+                    sampler.name(),
+                    density.name(),
+                    mapping.name()
+                );
+                out.push((name, options(sampler, density, mapping, lookup)));
+            }
+        }
+    }
+    out
+}
+
+/// Samples `ROWS` rows for `SEED` on both devices (ξ drawn on each) and compares.
+fn sample_agreement(gpu: &GpuLight, light: &EnvironmentLight) -> Agreement {
+    let rows: Vec<Row> = gpu
+        .sample_seeded(SEED, 0, ROWS)
+        .unwrap()
+        .iter()
+        .map(|s| s.row())
+        .collect();
+    compare(&cpu_sample_rows(light, SEED, 0, ROWS), &rows)
+}
+
+/// Directions that probe the awkward places: random ones, the poles, the φ seam
+/// (y = ±0 and tiny), texel-edge neighbourhoods, and non-unit lengths.
+fn probe_directions(n: usize) -> Vec<[f32; 3]> {
+    let mut rng = envlight::rng::SplitMix64::new(17);
+    let mut out = vec![
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+        [1e-6, 0.0, 1.0],
+        [0.0, -1e-6, -1.0],
+        [1.0, 0.0, 0.0],
+        [1.0, -0.0, 0.0],
+        [1.0, 1e-7, 0.3],
+        [1.0, -1e-7, -0.3],
+        [-1.0, 0.0, 0.0],
+        [-1.0, -1e-7, 0.5],
+        [2.0, 3.0, 4.0],
+    ];
+    while out.len() < n {
+        let d = envlight::math::uniform_sphere([rng.next_f32(), rng.next_f32()]);
+        out.push(d.to_array());
+    }
+    out
+}
+
+fn eval_agreement(gpu: &GpuLight, light: &EnvironmentLight) -> Agreement {
+    let dirs = probe_directions(ROWS);
+    let rows: Vec<Row> = gpu
+        .eval(&dirs)
+        .unwrap()
+        .iter()
+        .zip(&dirs)
+        .map(|(e, &d)| e.row(d))
+        .collect();
+    compare(&cpu_eval_rows(light, &dirs), &rows)
+}
+
+fn assert_agrees(case: &str, gpu: &GpuLight, light: &EnvironmentLight) {
+    let s = sample_agreement(gpu, light);
+    let e = eval_agreement(gpu, light);
+    println!("[{case}] sample: {s}\n[{case}] eval:   {e}");
+    assert!(s.passes(), "[{case}] sample rows disagree: {s}");
+    assert!(e.passes(), "[{case}] eval rows disagree: {e}");
+}
+
+#[test]
+fn every_ported_combination_agrees_with_the_cpu() {
+    let Some(device) = device() else { return };
+    for (name, o) in ported() {
+        for (map_name, image) in [
+            ("sun-sky 96x48", sun_sky(96, 48)),
+            ("random 40x20", maps::random(40, 20, 3)),
+        ] {
+            let light = EnvironmentLight::new(image, o).unwrap();
+            let gpu = GpuLight::new(device, &light).unwrap();
+            assert_agrees(&format!("{name}, {map_name}"), &gpu, &light);
+        }
+    }
+}
+
+#[test]
+fn rotation_scale_compensation_and_reduced_tables_agree() {
+    let Some(device) = device() else { return };
+    let base = LightOptions {
+        rotation: Rotation::about_z_degrees(37.0),
+        scale: 2.5,
+        ..Default::default()
+    };
+    let cases = [
+        ("rotated, scaled", base),
+        (
+            "alias, rotated",
+            LightOptions {
+                sampler: Sampler::Alias,
+                ..base
+            },
+        ),
+        (
+            "MIS-compensated",
+            LightOptions {
+                mis_compensation: true,
+                ..Default::default()
+            },
+        ),
+        (
+            "table 24 wide",
+            LightOptions {
+                table_width: Some(24),
+                ..Default::default()
+            },
+        ),
+        (
+            "alias, table 24 wide",
+            LightOptions {
+                sampler: Sampler::Alias,
+                table_width: Some(24),
+                ..Default::default()
+            },
+        ),
+        (
+            "bilinear density, rotated",
+            LightOptions {
+                density: Density::PiecewiseBilinear,
+                ..base
+            },
+        ),
+    ];
+    for (name, o) in cases {
+        let light = EnvironmentLight::new(sun_sky(96, 48), o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        assert_agrees(name, &gpu, &light);
+    }
+}
+
+#[test]
+fn degenerate_maps_agree() {
+    let Some(device) = device() else { return };
+    for (name, o) in ported() {
+        // One texel: the whole sphere is one cell.
+        let light = EnvironmentLight::new(maps::constant(1, 1), o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        assert_agrees(&format!("{name}, 1x1"), &gpu, &light);
+        // One hot texel on a pole row.
+        let light = EnvironmentLight::new(maps::hot(32, 16, 5, 0), o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        assert_agrees(&format!("{name}, hot texel on the top row"), &gpu, &light);
+        // All black: no sample, pdf 0 everywhere.
+        let light = EnvironmentLight::new(maps::black(16, 8), o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        let samples = gpu.sample_seeded(SEED, 0, 4096).unwrap();
+        assert!(
+            samples.iter().all(|s| !s.is_valid() && s.pdf == 0.0),
+            "[{name}] black map sampled"
+        );
+        assert!(samples
+            .iter()
+            .all(|s| s.direction.iter().all(|c| c.is_finite())));
+        let pdfs = gpu.pdf(&probe_directions(4096)).unwrap();
+        assert!(
+            pdfs.iter().all(|&p| p == 0.0),
+            "[{name}] black map has a pdf"
+        );
+        assert_agrees(&format!("{name}, black"), &gpu, &light);
+    }
+}
+
+#[test]
+fn f16_radiance_agrees_within_its_precision() {
+    let Some(device) = device() else { return };
+    let light = EnvironmentLight::new(sun_sky(96, 48), LightOptions::default()).unwrap();
+    let options = GpuTableOptions {
+        radiance: envlight::gpu::RadianceFormat::F16,
+    };
+    let tables = light.gpu_tables(&options).unwrap();
+    let gpu = GpuLight::from_tables(device, &tables, shader::WGSL).unwrap();
+    let dirs = probe_directions(ROWS);
+    let evals = gpu.eval(&dirs).unwrap();
+    let cpu = cpu_eval_rows(&light, &dirs);
+    let mut worst = 0.0f64;
+    for (e, c) in evals.iter().zip(&cpu) {
+        assert_eq!(e.pdf > 0.0, c.pdf > 0.0);
+        let scale = c.radiance.iter().fold(0.0f32, |m, &x| m.max(x)) as f64;
+        for k in 0..3 {
+            worst = worst.max((e.radiance[k] as f64 - c.radiance[k] as f64).abs() / scale);
+        }
+    }
+    println!("f16 radiance: worst relative difference {worst:.2e}");
+    // f16 keeps 11 significant bits: 2⁻¹¹ relative per texel.
+    assert!(worst < 1e-3, "{worst}");
+}
+
+/// The real maps in `shared/envmaps`, when present, with the default light and
+/// the bilinear density.
+#[test]
+fn real_maps_agree() {
+    let Some(device) = device() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
+    if !dir.is_dir() {
+        println!("skipping real maps: {} not found", dir.display());
+        return;
+    }
+    for file in ["sunrise.exr", "city.exr", "colorful_studio_2k.hdr"] {
+        let path = dir.join(file);
+        let image = envlight::load::load(&path, &Default::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .image;
+        for (name, o) in [
+            ("default", LightOptions::default()),
+            (
+                "alias",
+                LightOptions {
+                    sampler: Sampler::Alias,
+                    ..Default::default()
+                },
+            ),
+            (
+                "bilinear density",
+                LightOptions {
+                    density: Density::PiecewiseBilinear,
+                    ..Default::default()
+                },
+            ),
+        ] {
+            let light = EnvironmentLight::new(image.clone(), o).unwrap();
+            let gpu = GpuLight::new(device, &light).unwrap();
+            assert_agrees(&format!("{file}, {name}"), &gpu, &light);
+        }
+    }
+}
+
+/// The harness's checks (normalisation, pdf consistency, χ², E[L/p], support,
+/// efficiency) on samples and pdfs computed by the GPU.
+#[test]
+fn the_harness_passes_on_gpu_output() {
+    let Some(device) = device() else { return };
+    let config = Config {
+        chi2_samples: 400_000,
+        max_bins: 8_000,
+        consistency_samples: 100_000,
+        mc_samples: 400_000,
+        ..Config::SYNTHETIC
+    };
+    for (name, o) in [
+        ("inversion", LightOptions::default()),
+        (
+            "alias, equal-area",
+            LightOptions {
+                sampler: Sampler::Alias,
+                mapping: Mapping::EqualArea,
+                ..Default::default()
+            },
+        ),
+        (
+            "bilinear density, rotated",
+            LightOptions {
+                density: Density::PiecewiseBilinear,
+                rotation: Rotation::about_z_degrees(-70.0),
+                ..Default::default()
+            },
+        ),
+    ] {
+        let light = EnvironmentLight::new(sun_sky(64, 32), o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        let sampler = GpuSphereSampler::new(&gpu, SphereSampler::grid(&light).unwrap());
+        envlight_verify::assert_invariants(name, &sampler, &Integrand::luminance(), &config);
+        assert_eq!(sampler.error(), None);
+    }
+}
+
+/// The WGSL module with one piece of text replaced (which must be there).
+fn broken(what: &str, with: &str) -> String {
+    assert!(
+        shader::WGSL.contains(what),
+        "the shader no longer contains {what:?}"
+    );
+    shader::WGSL.replacen(what, with, 1)
+}
+
+/// A pdf 1% too large, and a flipped axis, are caught by the row comparison and
+/// by the harness.
+#[test]
+fn broken_shaders_are_rejected() {
+    let Some(device) = device() else { return };
+    let light = EnvironmentLight::new(sun_sky(64, 32), LightOptions::default()).unwrap();
+    let tables = light.gpu_tables(&GpuTableOptions::default()).unwrap();
+    let scaled = broken(
+        "return planar_pdf(p.uv) * p.inv_jacobian;",
+        "return planar_pdf(p.uv) * p.inv_jacobian * 1.01;",
+    );
+    let scaled = scaled.replacen(
+        "pdf = planar_pdf(p.uv) * p.inv_jacobian;",
+        "pdf = planar_pdf(p.uv) * p.inv_jacobian * 1.01;",
+        1,
+    );
+    let flipped = broken(
+        "return vec3<f32>(sin_theta * cos(phi), sin_theta * sin(phi), cos(theta));",
+        "return vec3<f32>(sin_theta * cos(phi), -sin_theta * sin(phi), cos(theta));",
+    );
+    let config = Config {
+        chi2_samples: 200_000,
+        max_bins: 4_000,
+        consistency_samples: 50_000,
+        mc_samples: 200_000,
+        ..Config::SYNTHETIC
+    };
+    for (name, wgsl) in [("pdf × 1.01", scaled), ("y flipped", flipped)] {
+        let gpu = GpuLight::from_tables(device, &tables, &wgsl).unwrap();
+        let s = sample_agreement(&gpu, &light);
+        println!("[{name}] sample: {s}");
+        assert!(
+            !s.passes(),
+            "[{name}] the row comparison accepted a broken shader: {s}"
+        );
+        let sampler = GpuSphereSampler::new(&gpu, SphereSampler::grid(&light).unwrap());
+        let report = envlight_verify::run(&sampler, &Integrand::luminance(), &config, &|_| {});
+        let failures = report.failures();
+        println!("[{name}] harness failures: {failures:?}");
+        assert!(
+            !failures.is_empty(),
+            "[{name}] the harness accepted a broken shader"
+        );
+    }
+}
