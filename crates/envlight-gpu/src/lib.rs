@@ -99,6 +99,10 @@ pub struct GpuDevice {
     /// Validation errors wgpu reports outside an error scope, kept instead of
     /// wgpu's default panic.
     uncaptured: Arc<Mutex<Vec<String>>>,
+    /// Held by a dispatch from its upload to its read-back: passes from several
+    /// threads (or several lights on one device) take turns. Concurrent waits on
+    /// one device were measured to stall for minutes on lavapipe.
+    turn: Arc<Mutex<()>>,
 }
 
 impl GpuDevice {
@@ -115,9 +119,13 @@ impl GpuDevice {
             ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
         });
         let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            // wgpu's own helper for this variable panics when nothing matches.
             Ok(name) if !name.is_empty() => {
-                pollster::block_on(wgpu::util::initialize_adapter_from_env(&instance, None))
-                    .map_err(|_| {
+                let wanted = name.to_lowercase();
+                pollster::block_on(instance.enumerate_adapters(backends))
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&wanted))
+                    .ok_or_else(|| {
                         GpuError::NoAdapter(format!(
                             "named {name:?} (WGPU_ADAPTER_NAME) {NO_ADAPTER_HINT}"
                         ))
@@ -169,6 +177,7 @@ impl GpuDevice {
             info,
             limits,
             uncaptured,
+            turn: Arc::new(Mutex::new(())),
         })
     }
 
@@ -339,7 +348,8 @@ const WORKGROUP: u32 = 64;
 
 /// A light's tables on a device, with the compute pipelines that query them.
 ///
-/// `Send + Sync`; calls from several threads take turns on the device.
+/// `Send + Sync`; calls from several threads (and lights sharing a device) take
+/// turns on the device.
 #[derive(Debug)]
 pub struct GpuLight {
     device: GpuDevice,
@@ -352,7 +362,6 @@ pub struct GpuLight {
     words: [u32; envlight::gpu::PARAMS_WORDS],
     /// Largest number of rows in one dispatch.
     max_rows: usize,
-    turn: Mutex<()>,
 }
 
 impl GpuLight {
@@ -472,7 +481,6 @@ impl GpuLight {
             pipelines,
             words,
             max_rows,
-            turn: Mutex::new(()),
         })
     }
 
@@ -573,7 +581,7 @@ impl GpuLight {
         debug_assert_eq!(std::mem::size_of::<T>(), 4 * query.output_words());
         let mut out: Vec<T> = vec![T::default(); count];
         let mut timings = Timings::default();
-        let _turn = self.turn.lock().unwrap_or_else(|e| e.into_inner());
+        let _turn = self.device.turn.lock().unwrap_or_else(|e| e.into_inner());
         let mut start = 0usize;
         while start < count {
             let rows = (count - start).min(self.max_rows);
