@@ -410,3 +410,89 @@ fn broken_shaders_are_rejected() {
         );
     }
 }
+
+/// Orientation, independently of the CPU light: on a map whose texel (i, j) holds
+/// `[i, j, 1]`, the GPU's radiance at each texel's centre direction (from the
+/// harness's own mappings, DESIGN.md §2 and the equal-area square) is that texel,
+/// rotation included; and the GPU draws its samples where the map is bright.
+#[test]
+fn directions_point_where_the_conventions_say() {
+    let Some(device) = device() else { return };
+    let (w, h) = (24usize, 12usize);
+    let coded = EnvImage::from_fn(w, h, |x, y| [x as f32, y as f32, 1.0]).unwrap();
+    for (mapping, rotate) in [
+        (Mapping::Equirectangular, 0.0f32),
+        (Mapping::Equirectangular, 90.0),
+        (Mapping::EqualArea, 0.0),
+    ] {
+        let (image, size) = match mapping {
+            Mapping::Equirectangular => (coded.clone(), [w, h]),
+            Mapping::EqualArea => (
+                EnvImage::from_fn(16, 16, |x, y| [x as f32, y as f32, 1.0]).unwrap(),
+                [16, 16],
+            ),
+        };
+        let o = LightOptions {
+            mapping,
+            input_mapping: mapping,
+            lookup: Lookup::Nearest,
+            rotation: Rotation::about_z_degrees(rotate),
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(image, o).unwrap();
+        let gpu = GpuLight::new(device, &light).unwrap();
+        let turn = rotate.to_radians() as f64;
+        let mut dirs = Vec::new();
+        let mut expected = Vec::new();
+        for j in 0..size[1] {
+            for i in 0..size[0] {
+                let (u, v) = (
+                    (i as f64 + 0.5) / size[0] as f64,
+                    (j as f64 + 0.5) / size[1] as f64,
+                );
+                let d = match mapping {
+                    Mapping::Equirectangular => envlight_verify::direction_at(u, v),
+                    Mapping::EqualArea => envlight_verify::square_to_sphere(u, v),
+                };
+                // The light-to-world rotation about +z.
+                let (s, c) = turn.sin_cos();
+                let d = [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]];
+                dirs.push(d.map(|x| x as f32));
+                expected.push([i as f32, j as f32, 1.0]);
+            }
+        }
+        let got = gpu.radiance(&dirs).unwrap();
+        assert_eq!(got, expected, "{mapping:?}, rotated {rotate}°");
+    }
+    // Conventions by name: the top row looks up, u = 0 along +x, u = ¼ along +y.
+    let light = EnvironmentLight::new(
+        coded,
+        LightOptions {
+            lookup: Lookup::Nearest,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let gpu = GpuLight::new(device, &light).unwrap();
+    let l = gpu
+        .radiance(&[[0.0, 0.0, 1.0], [1.0, 0.01, 0.0], [-0.01, 1.0, 0.0]])
+        .unwrap();
+    assert_eq!(l[0][1], 0.0, "+z is the top row");
+    assert_eq!(
+        l[1],
+        [0.0, (h / 2) as f32, 1.0],
+        "+x is u = 0 on the equator"
+    );
+    assert_eq!(l[2][0], (w / 4) as f32, "+y is u = 1/4");
+    // Samples go where the light is: a hot texel's direction.
+    let light = EnvironmentLight::new(maps::hot(w, h, 7, 3), LightOptions::default()).unwrap();
+    let gpu = GpuLight::new(device, &light).unwrap();
+    let (_, hot) = light.brightest();
+    let near = gpu
+        .sample_seeded(1, 0, 4096)
+        .unwrap()
+        .iter()
+        .filter(|s| s.is_valid() && envlight::Vec3::from(s.direction).dot(hot) > 0.9)
+        .count();
+    assert!(near > 4000, "{near} of 4096 samples near the hot texel");
+}
