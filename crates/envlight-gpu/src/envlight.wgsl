@@ -870,6 +870,12 @@ fn centre_of(cell: vec2<u32>) -> vec2<f32> {
     return (vec2<f32>(cell) + 0.5) / vec2<f32>(f32(params.table_width), f32(params.table_height));
 }
 
+// A sampled direction and its image point as `light_pdf` finds it.
+struct Settled {
+    direction: vec3<f32>,
+    point: ImagePoint,
+}
+
 // The world direction of a point drawn in `s.cell`, settled so that the
 // direction maps back into that cell. f32 trigonometry both ways moves a point
 // by up to ~1e-6 of the image, which near a cell edge can carry the direction
@@ -878,21 +884,22 @@ fn centre_of(cell: vec2<u32>) -> vec2<f32> {
 // (by 0.1%, then four times further each try) until it does: the density is
 // unchanged inside the cell, and only a band of about 1e-6 of the cell along
 // its edges is squeezed inward.
-fn settle_in_cell(s: PlanarSample) -> vec3<f32> {
+fn settle_in_cell(s: PlanarSample) -> Settled {
     var uv = s.uv;
     let centre = centre_of(s.cell);
     var step = 1e-3;
     var direction = to_world(uv_to_local(uv));
+    var back = local_to_uv(to_light(direction));
     for (var k = 0; k < 6; k++) {
-        let back = local_to_uv(to_light(direction)).uv;
-        if all(cell_of(back) == s.cell) {
+        if all(cell_of(back.uv) == s.cell) {
             break;
         }
         uv = mix(uv, centre, step);
         step = min(4.0 * step, 1.0);
         direction = to_world(uv_to_local(uv));
+        back = local_to_uv(to_light(direction));
     }
-    return direction;
+    return Settled(direction, back);
 }
 
 // Draws a direction for ξ ∈ [0, 1)² with density ∝ the light's importance. With no
@@ -911,12 +918,14 @@ fn light_sample(xi: vec2<f32>) -> LightSample {
     } else {
         s = sample_inversion(xi);
     }
-    let direction = settle_in_cell(s);
-    let e = light_eval(direction);
-    if !(e.pdf > 0.0) {
+    let settled = settle_in_cell(s);
+    let direction = settled.direction;
+    // What light_eval(direction) gives, from the image point already found.
+    let pdf = planar_pdf(settled.point.uv) * settled.point.inv_jacobian;
+    if !(pdf > 0.0) {
         return LightSample(direction, 0.0, vec3<f32>(0.0), false);
     }
-    return LightSample(direction, e.pdf, e.radiance, true);
+    return LightSample(direction, pdf, lookup(settled.point.uv), true);
 }
 
 // ---------------------------------------------------------------------------
