@@ -5,7 +5,7 @@
 
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::{EnvironmentLight, LightOptions, Lookup};
-use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Row};
+use envlight_gpu::agreement::{compare, cpu_sample_rows, measure, Row};
 use envlight_gpu::{GpuDevice, GpuLight};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -24,9 +24,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let device = GpuDevice::new()?;
     let r = device.report();
     println!("adapter: {} ({}, {})", r.name, r.backend, r.device_type);
-    let directions: Vec<[f32; 3]> = (0..rows as u64)
-        .map(|k| envlight::math::uniform_sphere(envlight::rng::xi_2d(1, k)).to_array())
-        .collect();
     for (sampler, density) in [
         (Sampler::Inversion, Density::PiecewiseConstant),
         (Sampler::Alias, Density::PiecewiseConstant),
@@ -43,26 +40,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 };
                 let light = EnvironmentLight::new(image.clone(), options)?;
                 let gpu = GpuLight::new(&device, &light)?;
-                let cpu_rows = cpu_sample_rows(&light, 0, 0, rows);
-                let gpu_rows: Vec<Row> = gpu
-                    .sample_seeded(0, 0, rows)?
-                    .iter()
-                    .map(|s| s.row())
-                    .collect();
-                let s = compare(&cpu_rows, &gpu_rows);
-                let evals: Vec<Row> = gpu
-                    .eval(&directions)?
-                    .iter()
-                    .zip(&directions)
-                    .map(|(e, &d)| e.row(d))
-                    .collect();
-                let e = compare(&cpu_eval_rows(&light, &directions), &evals);
+                let (s, e) = measure(&gpu, &light, 0, rows)?;
                 println!(
                     "{} {} {} {lookup:?}\n  sample: {s}\n  eval:   {e}",
                     sampler.name(),
                     density.name(),
                     mapping.name()
                 );
+                let cpu_rows = cpu_sample_rows(&light, 0, 0, if show > 0 { rows } else { 0 });
+                let gpu_rows: Vec<Row> = gpu
+                    .sample_seeded(0, 0, cpu_rows.len())?
+                    .iter()
+                    .map(|s| s.row())
+                    .collect();
                 let mut shown = 0;
                 for (k, (c, g)) in cpu_rows.iter().zip(&gpu_rows).enumerate() {
                     if shown >= show {

@@ -74,6 +74,35 @@ pub fn cpu_eval_rows(light: &EnvironmentLight, directions: &[[f32; 3]]) -> Vec<R
         .collect()
 }
 
+/// How `gpu` agrees with `light` (the light its tables came from) on `rows` rows
+/// of each query: `sample` for seed `seed` (the `ξ` drawn on each device) and
+/// `eval` at as many uniformly random directions (from seed `seed + 1`). What
+/// `envlight info --device gpu` and the `gpu_agreement` example report.
+pub fn measure(
+    gpu: &crate::GpuLight,
+    light: &EnvironmentLight,
+    seed: u64,
+    rows: usize,
+) -> Result<(Agreement, Agreement), crate::GpuError> {
+    let samples: Vec<Row> = gpu
+        .sample_seeded(seed, 0, rows)?
+        .iter()
+        .map(|s| s.row())
+        .collect();
+    let sample = compare(&cpu_sample_rows(light, seed, 0, rows), &samples);
+    let directions: Vec<[f32; 3]> = (0..rows as u64)
+        .map(|k| envlight::math::uniform_sphere(envlight::rng::xi_2d(seed + 1, k)).to_array())
+        .collect();
+    let evals: Vec<Row> = gpu
+        .eval(&directions)?
+        .iter()
+        .zip(&directions)
+        .map(|(e, &d)| e.row(d))
+        .collect();
+    let eval = compare(&cpu_eval_rows(light, &directions), &evals);
+    Ok((sample, eval))
+}
+
 /// What a comparison of two row sets found.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Agreement {

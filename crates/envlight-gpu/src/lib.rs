@@ -139,7 +139,10 @@ impl GpuDevice {
                 }),
             )
             .map_err(|_| {
-                GpuError::NoAdapter(format!("(backends {backends:?}) {NO_ADAPTER_HINT}"))
+                GpuError::NoAdapter(format!(
+                    "(backends: {}) {NO_ADAPTER_HINT}",
+                    backend_names(backends)
+                ))
             })?,
         };
         let info = adapter.get_info();
@@ -727,6 +730,22 @@ impl GpuLight {
             .map(|_| ())
             .map_err(|e| GpuError::Readback(e.to_string()))
     }
+}
+
+/// The backends of a set, by name: `vulkan, metal, dx12`.
+fn backend_names(backends: wgpu::Backends) -> String {
+    [
+        (wgpu::Backends::VULKAN, "vulkan"),
+        (wgpu::Backends::METAL, "metal"),
+        (wgpu::Backends::DX12, "dx12"),
+        (wgpu::Backends::GL, "gl"),
+        (wgpu::Backends::BROWSER_WEBGPU, "webgpu"),
+    ]
+    .into_iter()
+    .filter(|(b, _)| backends.contains(*b))
+    .map(|(_, name)| name)
+    .collect::<Vec<_>>()
+    .join(", ")
 }
 
 fn binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {

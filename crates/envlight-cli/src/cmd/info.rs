@@ -386,23 +386,7 @@ impl GpuInfo {
     const ROWS: usize = 65536;
 
     fn measure(gpu: &envlight_gpu::GpuLight, light: &EnvironmentLight) -> anyhow::Result<Self> {
-        use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Row};
-        let samples: Vec<Row> = gpu
-            .sample_seeded(0, 0, Self::ROWS)?
-            .iter()
-            .map(|s| s.row())
-            .collect();
-        let sample = compare(&cpu_sample_rows(light, 0, 0, Self::ROWS), &samples);
-        let directions: Vec<[f32; 3]> = (0..Self::ROWS as u64)
-            .map(|k| envlight::math::uniform_sphere(envlight::rng::xi_2d(1, k)).to_array())
-            .collect();
-        let evals: Vec<Row> = gpu
-            .eval(&directions)?
-            .iter()
-            .zip(&directions)
-            .map(|(e, &d)| e.row(d))
-            .collect();
-        let eval = compare(&cpu_eval_rows(light, &directions), &evals);
+        let (sample, eval) = envlight_gpu::agreement::measure(gpu, light, 0, Self::ROWS)?;
         Ok(Self {
             adapter: gpu.device().report(),
             device_bytes: gpu.device_bytes(),
