@@ -4,7 +4,6 @@ the frames, every error path, and threads."""
 
 import os
 import pathlib
-import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -107,21 +106,9 @@ def test_from_array_equals_the_same_texels_from_a_file(tmp_path):
         assert x.integral_rgb == a.integral_rgb
 
 
-def envlight_cli():
-    found = shutil.which("envlight")
-    if found:
-        return found
-    for profile in ("release", "debug"):
-        p = ROOT / "target" / profile / "envlight"
-        if p.exists():
-            return str(p)
-    return None
 
-
-def test_equal_to_the_rust_cli(tmp_path):
-    cli = envlight_cli()
-    if cli is None:
-        pytest.skip("the envlight binary is not built (cargo build --release)")
+def test_equal_to_the_rust_cli(tmp_path, envlight_cli):
+    cli = envlight_cli
     rgb = sky()
     path = tmp_path / "sky.pfm"
     write_pfm(path, rgb)

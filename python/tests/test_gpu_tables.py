@@ -2,8 +2,6 @@
 arrays, checked for shapes and dtypes, against the map, against the documented
 layout, and against the file `envlight export` writes."""
 
-import pathlib
-import shutil
 import subprocess
 
 import numpy as np
@@ -11,7 +9,6 @@ import pytest
 
 import envlight
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
 CDF_ONE = 2**32 - 1
 
 # Word indices of the parameter block (docs/gpu-tables.md).
@@ -142,16 +139,6 @@ def test_errors():
     assert bright.gpu_tables()["radiance"][2, 5, 0] == np.float32(1e5)
 
 
-def envlight_cli():
-    found = shutil.which("envlight")
-    if found:
-        return found
-    for profile in ("release", "debug"):
-        p = ROOT / "target" / profile / "envlight"
-        if p.exists():
-            return str(p)
-    return None
-
 
 def read_sections(data):
     """The sections of a GPU tables file, read by the documented layout."""
@@ -169,10 +156,8 @@ def read_sections(data):
     return out
 
 
-def test_equal_to_the_file_envlight_export_writes(tmp_path):
-    cli = envlight_cli()
-    if cli is None:
-        pytest.skip("the envlight binary is not built (cargo build --release)")
+def test_equal_to_the_file_envlight_export_writes(tmp_path, envlight_cli):
+    cli = envlight_cli
     rgb = small_map()
     h, w, _ = rgb.shape
     path = tmp_path / "map.pfm"

@@ -63,6 +63,14 @@ fn envmaps() -> Option<PathBuf> {
     }
 }
 
+/// The names of the entries of `dir` (to see that no temporary file was left).
+fn file_names(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect()
+}
+
 fn stdout_of(cmd: &mut Command) -> String {
     let out = cmd.output().unwrap();
     assert!(
@@ -1353,10 +1361,7 @@ fn a_failing_command_leaves_an_existing_output_untouched() {
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "precious\n");
     // No temporary files left behind.
-    let names: Vec<String> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let names = file_names(dir.path());
     assert_eq!(names.len(), 2, "{names:?}");
     // And a new output that fails is never created.
     let fresh = dir.path().join("fresh.csv");
@@ -1755,10 +1760,7 @@ fn export_failures_leave_an_existing_file_untouched() {
         .code();
     assert_eq!(code, Some(2));
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "precious\n");
-    let names: Vec<String> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let names = file_names(dir.path());
     assert_eq!(names.len(), 2, "{names:?}");
     // The same map in f32 is fine, and replaces the file.
     let (bytes, _) = export(&[bright.to_str().unwrap()], &out);

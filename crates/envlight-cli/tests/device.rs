@@ -229,7 +229,10 @@ fn assert_fails(args: &[&str], envs: &[(&str, &str)], code: i32, needle: &str) {
         lines[0].starts_with("error: ") && lines[0].contains(needle),
         "{stderr}"
     );
-    assert!(out.stdout.is_empty() || !args.contains(&"sample"));
+    assert!(
+        out.stdout.is_empty(),
+        "{args:?} wrote to stdout before failing"
+    );
 }
 
 #[test]

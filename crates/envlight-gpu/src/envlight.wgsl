@@ -89,7 +89,6 @@ struct Batch {
 // Constants and small helpers
 // ---------------------------------------------------------------------------
 
-const PI: f32 = 3.14159265358979323846;
 // dω / du dv of the equirectangular map, divided by sin θ.
 const EQUIRECT_JACOBIAN: f32 = 19.7392088021787172;
 // dω / du dv of the equal-area square.
@@ -100,7 +99,6 @@ const ONE_MINUS_EPSILON: f32 = 0x1.fffffep-1;
 // 2³² is 2⁻³² relative, far below f32's resolution.
 const INV_CDF_ONE: f32 = 0x1p-32;
 
-const SAMPLER_INVERSION: u32 = 0u;
 const SAMPLER_ALIAS: u32 = 1u;
 const DENSITY_BILINEAR: u32 = 1u;
 const MAPPING_EQUAL_AREA: u32 = 1u;
@@ -264,8 +262,6 @@ struct CdfSample {
     cell: u32,
     // Where ξ fell within the cell's CDF segment, in [0, 1].
     offset: f32,
-    // The cell's width in CDF units.
-    width: u32,
 }
 
 // The cell of a CDF of n cells (words cdf..cdf+n+1) holding ξ, found from the guide
@@ -287,7 +283,7 @@ fn cdf_sample(cdf: u32, guide: u32, shift: u32, n: u32, xi: f32) -> CdfSample {
     if width > 0u {
         offset = (f32(f.x - lo) + f.frac) / f32(width);
     }
-    return CdfSample(o, offset, width);
+    return CdfSample(o, offset);
 }
 
 // The widths [w_u, w_v] of cell (iu, iv) of the 2D table.
@@ -814,21 +810,22 @@ struct Eval {
 
 fn light_eval(direction: vec3<f32>) -> Eval {
     let p = local_to_uv(to_light(direction));
-    var pdf = 0.0;
-    if params.black == 0u {
-        pdf = planar_pdf(p.uv) * p.inv_jacobian;
+    return Eval(solid_angle_pdf(p), lookup(p.uv));
+}
+
+// The solid-angle density at an image point: the planar density over dω/du dv;
+// 0 for a black light and at the poles of a lat-long map.
+fn solid_angle_pdf(p: ImagePoint) -> f32 {
+    if params.black != 0u {
+        return 0.0;
     }
-    return Eval(pdf, lookup(p.uv));
+    return planar_pdf(p.uv) * p.inv_jacobian;
 }
 
 // The solid-angle density (per steradian) of a world direction: 0 where the light
 // is black, at the poles of a lat-long map, and for a black light.
 fn light_pdf(direction: vec3<f32>) -> f32 {
-    if params.black != 0u {
-        return 0.0;
-    }
-    let p = local_to_uv(to_light(direction));
-    return planar_pdf(p.uv) * p.inv_jacobian;
+    return solid_angle_pdf(local_to_uv(to_light(direction)));
 }
 
 // Radiance arriving from a world direction (scale applied).
@@ -921,7 +918,7 @@ fn light_sample(xi: vec2<f32>) -> LightSample {
     let settled = settle_in_cell(s);
     let direction = settled.direction;
     // What light_eval(direction) gives, from the image point already found.
-    let pdf = planar_pdf(settled.point.uv) * settled.point.inv_jacobian;
+    let pdf = solid_angle_pdf(settled.point);
     if !(pdf > 0.0) {
         return LightSample(direction, 0.0, vec3<f32>(0.0), false);
     }
