@@ -85,6 +85,18 @@ class EnvironmentLight:
         roughness: Optional[float] = None,
     ) -> _F32:
         """The product sampler's pdf of each direction at its shading point."""
+    def sample_portal(self, points: _F32, u: _F32, portals: npt.ArrayLike) -> Tuple[_F32, _F32, _F32]:
+        """Portal sampling: one direction per point (points (N, 3), u (N, 2)) through
+        the portals only (portals (K, 4, 3): K ≤ 8 planar convex quads, corners in
+        order around each, either winding), with density proportional to radiance
+        restricted to them; (directions (N, 3), pdf (N,), radiance (N, 3)), a zero
+        direction with pdf 0 where no lit sky is seen through a portal. The portal
+        tables are built once and reused while the same portals are passed.
+        Raises ValueError for a bad shape or a degenerate, non-planar or non-convex
+        quad."""
+    def pdf_portal(self, points: _F32, directions: _F32, portals: npt.ArrayLike) -> _F32:
+        """The portal light's solid-angle pdf (sr⁻¹) of each direction from its point:
+        the exact mixture over the portals the ray crosses, 0 through no portal."""
     def verify(
         self, *, samples: int = 200000, seed: int = 0, normal: Optional[Sequence[float]] = None
     ) -> list[dict]:
@@ -112,6 +124,21 @@ class EnvironmentLight:
 
         Raises ValueError for the hierarchical sampler (not ported to the GPU), or
         radiance="f16" with a texel above 65504."""
+    def sun(self) -> Optional[Dict[str, Any]]:
+        """The map's sun (its brightest compact source, as a uniform disc), or None
+        when it has none (radius > 5°, contrast < 20 or < 1% of the power).
+
+        Keys: "direction" (unit 3-tuple in this light's frame, rotation applied),
+        "angular_radius_deg", "solid_angle_sr", "radiance" and "irradiance" (RGB
+        3-tuples, scale applied; irradiance at normal incidence, L π sin² r),
+        "power_fraction" (share of ∫Y dω), "elevation_deg" and "azimuth_deg" (of
+        the z-up direction: above the xy plane, from +x towards +y), "contrast"
+        (the disc's luminance over the surrounding sky's median)."""
+    def sun_residual(self) -> _F32:
+        """The light's image without its sun: (H, W, 3) float32, same size and
+        mapping, the sun's texels in-painted from the sky around it, unscaled; the
+        image itself when there is no sun. Residual + the disc of sun() reproduce
+        the map's irradiance at any normal that does not graze the sun."""
     @property
     def width(self) -> int: ...
     @property

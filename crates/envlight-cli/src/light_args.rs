@@ -478,6 +478,133 @@ pub fn warn(message: &str) {
     let _ = writeln!(std::io::stderr().lock(), "warning: {message}");
 }
 
+/// `--portal QUAD` (repeatable) and `--at X,Y,Z`: sample the map only through
+/// windows, from one point (DESIGN.md §6d).
+#[derive(Debug, Clone, clap::Args)]
+pub struct PortalArgs {
+    /// A portal (a window the map is seen through): the four corners of a planar
+    /// convex quad in order around it (either winding), "x,y,z;x,y,z;x,y,z;x,y,z" in
+    /// world space. Repeatable (up to 8). Needs --at. Directions then come only
+    /// through the portals, and pdf is the portal light's density at --at (0 for a
+    /// direction through no portal).
+    #[arg(long, value_name = "X,Y,Z;X,Y,Z;X,Y,Z;X,Y,Z", value_parser = parse_portal,
+          allow_hyphen_values = true)]
+    pub portal: Vec<envlight::portal::Portal>,
+
+    /// The point the portals are seen from (needs --portal).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    pub at: Option<envlight::Vec3>,
+}
+
+impl PortalArgs {
+    /// The portals and the point, when asked for; a usage error when only one of
+    /// `--portal` and `--at` is given, or `--portal` with `--normal` (`normal`) or
+    /// `--device gpu` (`gpu`). Called before the map is read, so these fail fast.
+    pub fn requested(
+        &self,
+        normal: bool,
+        gpu: bool,
+    ) -> anyhow::Result<Option<(&[envlight::portal::Portal], envlight::Vec3)>> {
+        if gpu && !self.portal.is_empty() {
+            return Err(UsageError(
+                "--portal (portal sampling) is not ported to the GPU; use --device cpu".into(),
+            )
+            .into());
+        }
+        match (self.portal.is_empty(), self.at) {
+            (true, None) => Ok(None),
+            (false, None) => Err(UsageError(
+                "--portal needs --at X,Y,Z: portals are sampled from one point, the one the \
+                 windows are seen from"
+                    .into(),
+            )
+            .into()),
+            (true, Some(_)) => Err(UsageError(
+                "--at needs at least one --portal: it names the point the portals are seen from"
+                    .into(),
+            )
+            .into()),
+            (false, Some(_)) if normal => Err(UsageError(
+                "--portal and --normal cannot be combined: choose portal sampling or product \
+                 sampling"
+                    .into(),
+            )
+            .into()),
+            (false, Some(at)) => {
+                if self.portal.len() > envlight::portal::MAX_PORTALS {
+                    return Err(UsageError(format!(
+                        "at most {} --portal options, got {}",
+                        envlight::portal::MAX_PORTALS,
+                        self.portal.len()
+                    ))
+                    .into());
+                }
+                Ok(Some((&self.portal, at)))
+            }
+        }
+    }
+
+    /// The portal light over `light` and the point, when asked for (see
+    /// [`Self::requested`]).
+    pub fn build(
+        &self,
+        light: &Arc<EnvironmentLight>,
+        normal: bool,
+        gpu: bool,
+    ) -> anyhow::Result<Option<(envlight::portal::PortalLight, envlight::Vec3)>> {
+        let Some((portals, at)) = self.requested(normal, gpu)? else {
+            return Ok(None);
+        };
+        let pl = envlight::portal::PortalLight::new(
+            Arc::clone(light),
+            portals,
+            envlight::portal::PortalOptions::default(),
+        )
+        .map_err(|e| UsageError(format!("--portal: {e}")))?;
+        Ok(Some((pl, at)))
+    }
+}
+
+/// Three finite comma-separated numbers.
+fn parse_xyz(text: &str) -> Result<envlight::Vec3, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, z] = parts[..] else {
+        return Err(format!(
+            "expected three comma-separated numbers X,Y,Z, got {} part(s) in '{text}'",
+            parts.len()
+        ));
+    };
+    let number = |s: &str| -> Result<f32, String> {
+        match s.parse::<f32>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => Err(format!("'{s}' is not finite")),
+            Err(_) => Err(format!("'{s}' is not a number")),
+        }
+    };
+    Ok(envlight::Vec3::new(number(x)?, number(y)?, number(z)?))
+}
+
+/// `--at X,Y,Z`.
+pub fn parse_point(text: &str) -> Result<envlight::Vec3, String> {
+    parse_xyz(text)
+}
+
+/// `--portal "x,y,z;x,y,z;x,y,z;x,y,z"`: four corners of a planar convex quad.
+pub fn parse_portal(text: &str) -> Result<envlight::portal::Portal, String> {
+    let corners: Vec<&str> = text.split(';').map(str::trim).collect();
+    let [a, b, c, d] = corners[..] else {
+        return Err(format!(
+            "expected four corners separated by ';' (x,y,z;x,y,z;x,y,z;x,y,z), got {}",
+            corners.len()
+        ));
+    };
+    let mut points = [envlight::Vec3::default(); 4];
+    for (k, (p, t)) in points.iter_mut().zip([a, b, c, d]).enumerate() {
+        *p = parse_xyz(t).map_err(|e| format!("corner {}: {e}", k + 1))?;
+    }
+    envlight::portal::Portal::new(points).map_err(|e| e.to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -510,5 +637,28 @@ mod tests {
             })
             .collect();
         assert_eq!(mappings, Mapping::ALL);
+    }
+
+    #[test]
+    fn portals_parse_and_explain_what_is_wrong() {
+        let p = parse_portal("0,0,2; 1,0,2; 1,1,2; 0,1,2").unwrap();
+        assert!(p.is_parallelogram());
+        assert!(parse_portal("0,0,2;1,0,2;1,1,2;0,1,2.5")
+            .unwrap_err()
+            .contains("not planar"));
+        assert!(parse_portal("0,0,0;1,0,0;2,0,0;3,0,0")
+            .unwrap_err()
+            .contains("degenerate"));
+        assert!(parse_portal("0,0,0;1,0,0;1,1,0")
+            .unwrap_err()
+            .contains("four corners"));
+        assert!(parse_portal("0,0,0;1,0,0;1,x,0;0,1,0")
+            .unwrap_err()
+            .contains("corner 3"));
+        assert!(parse_point("1,2").is_err());
+        assert_eq!(
+            parse_point("1,-2,3").unwrap(),
+            envlight::Vec3::new(1.0, -2.0, 3.0)
+        );
     }
 }

@@ -75,6 +75,9 @@ enum Command {
     /// Write the GPU compute shader (sampling, pdf, radiance) in WGSL, GLSL, HLSL,
     /// MSL or SPIR-V.
     Shader(cmd::shader::Args),
+    /// Find the map's sun (a compact bright source): direction, size, radiance,
+    /// irradiance; optionally write the map without it (--residual).
+    Sun(cmd::sun::Args),
 }
 
 impl Command {
@@ -89,6 +92,7 @@ impl Command {
             Command::Bench(args) => cmd::bench::run(args),
             Command::Render(args) => cmd::render::run(args).map(|()| cmd::Outcome::Success),
             Command::Shader(args) => cmd::shader::run(args),
+            Command::Sun(args) => cmd::sun::run(args),
         }
     }
 }

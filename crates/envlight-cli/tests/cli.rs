@@ -1766,3 +1766,68 @@ fn export_failures_leave_an_existing_file_untouched() {
     let (bytes, _) = export(&[bright.to_str().unwrap()], &out);
     assert_eq!(std::fs::read(&out).unwrap(), bytes);
 }
+
+/// `info --normal`'s efficiencies against an independent quadrature of what a
+/// renderer's estimates see: 4 × 4 midpoints per texel of the lat-long map, the
+/// lookup's radiance times the clamped cosine over the sampler's actual pdf, for
+/// the product sampler and the light alone, both densities (within 3%).
+#[test]
+fn info_efficiencies_match_a_fine_quadrature() {
+    use envlight::light::Density;
+    use envlight::{EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3};
+    use std::sync::Arc;
+    let normal = Vec3::new(0.0, 0.0, 1.0);
+    for density in Density::ALL {
+        let v = info_json(&[
+            "builtin:sky",
+            "--normal",
+            "0,0,1",
+            "--density",
+            density.name(),
+        ]);
+        assert_eq!(v["product_density"], density.name(), "{v}");
+        let image = envlight::builtin::sky(1024, 512);
+        let (w, h) = (image.width(), image.height());
+        let options = LightOptions {
+            density,
+            ..Default::default()
+        };
+        let light = Arc::new(EnvironmentLight::new(image, options).unwrap());
+        let sampler = ProductSampler::new(light.clone(), ProductOptions::default());
+        let point = sampler.at(&Factor::cosine(normal));
+        let (mut g1, mut product, mut alone) = (0.0f64, 0.0f64, 0.0f64);
+        for j in 0..h {
+            for b in 0..4 {
+                let v = (j as f64 + (b as f64 + 0.5) / 4.0) / h as f64;
+                let dw = 2.0 * std::f64::consts::PI.powi(2) * (std::f64::consts::PI * v).sin()
+                    / (16 * w * h) as f64;
+                for i in 0..w {
+                    for a in 0..4 {
+                        let u = (i as f64 + (a as f64 + 0.5) / 4.0) / w as f64;
+                        let d = light.uv_to_direction([u as f32, v as f32]);
+                        let y = envlight::color::luminance(light.radiance(d)) as f64;
+                        let f = y * normal.dot(d).max(0.0) as f64;
+                        if f > 0.0 {
+                            g1 += f * dw;
+                            product += f * f / point.pdf(d) as f64 * dw;
+                            alone += f * f / light.pdf(d) as f64 * dw;
+                        }
+                    }
+                }
+            }
+        }
+        let (product, alone) = (g1 * g1 / product, g1 * g1 / alone);
+        let reported = (
+            v["product_efficiency"].as_f64().unwrap(),
+            v["light_efficiency"].as_f64().unwrap(),
+        );
+        println!(
+            "{}: product {} reported, {product} by 4x4 quadrature; light {} reported, {alone}",
+            density.name(),
+            reported.0,
+            reported.1
+        );
+        assert!((reported.0 / product - 1.0).abs() < 0.03, "{v}");
+        assert!((reported.1 / alone - 1.0).abs() < 0.03, "{v}");
+    }
+}

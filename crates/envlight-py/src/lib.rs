@@ -11,6 +11,7 @@ use std::sync::{Arc, OnceLock};
 
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::load::{load, LoadOptions};
+use envlight::portal::{Portal, PortalLight, PortalOptions};
 use envlight::{
     EnvImage, Factor, LightOptions, Lookup, ProductOptions, ProductSampler, Rotation, Vec3,
 };
@@ -197,6 +198,11 @@ struct PyEnvironmentLight {
     light: Arc<envlight::EnvironmentLight>,
     frame: Frame,
     product: OnceLock<ProductSampler>,
+    /// The sun and the residual, found on first use (`sun`, `sun_residual`).
+    sun: OnceLock<envlight::SunExtraction>,
+    /// The portal light of the last portals given to `sample_portal`/`pdf_portal`
+    /// (their corners, z-up), reused while the same portals come back.
+    portals: std::sync::Mutex<Option<(Vec<f32>, Arc<PortalLight>)>>,
 }
 
 impl PyEnvironmentLight {
@@ -206,6 +212,70 @@ impl PyEnvironmentLight {
             light: Arc::new(light),
             frame,
             product: OnceLock::new(),
+            sun: OnceLock::new(),
+            portals: std::sync::Mutex::new(None),
+        })
+    }
+
+    /// The portal light for `portals` (anything numpy reads as `(K, 4, 3)` corners,
+    /// in this light's frame): built on first use, reused while the same corners
+    /// come back. `ValueError` for a bad shape or a bad quad (saying why).
+    fn portal_light(
+        &self,
+        py: Python<'_>,
+        portals: &Bound<'_, PyAny>,
+    ) -> PyResult<Arc<PortalLight>> {
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("dtype", "float32")?;
+        let array = py
+            .import("numpy")?
+            .getattr("ascontiguousarray")?
+            .call((portals,), Some(&kwargs))?;
+        let array: PyReadonlyArray3<'_, f32> = array.extract().map_err(|_| {
+            PyValueError::new_err("portals must have shape (K, 4, 3): K quads of four corners")
+        })?;
+        let shape = array.shape();
+        if shape[1] != 4 || shape[2] != 3 || shape[0] == 0 {
+            return Err(PyValueError::new_err(format!(
+                "portals must have shape (K, 4, 3) with K ≥ 1, not {shape:?}"
+            )));
+        }
+        let values: Vec<f32> = array.as_array().iter().copied().collect();
+        let corners: Vec<f32> = self::directions(&values, self.frame)
+            .iter()
+            .flat_map(|p| p.to_array())
+            .collect();
+        let mut cache = self
+            .portals
+            .lock()
+            .map_err(|_| PyValueError::new_err("portal cache poisoned"))?;
+        if let Some((key, light)) = cache.as_ref() {
+            if *key == corners {
+                return Ok(light.clone());
+            }
+        }
+        let quads = corners
+            .chunks_exact(12)
+            .enumerate()
+            .map(|(k, c)| {
+                let p = |i: usize| Vec3::new(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+                Portal::new([p(0), p(1), p(2), p(3)])
+                    .map_err(|e| PyValueError::new_err(format!("portal {k}: {e}")))
+            })
+            .collect::<PyResult<Vec<Portal>>>()?;
+        let light = py
+            .detach(|| PortalLight::new(self.light.clone(), &quads, PortalOptions::default()))
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let light = Arc::new(light);
+        *cache = Some((corners, light.clone()));
+        Ok(light)
+    }
+
+    /// The light's sun extraction, computed once with the interpreter lock released.
+    fn sun_extraction(&self, py: Python<'_>) -> &envlight::SunExtraction {
+        py.detach(|| {
+            self.sun
+                .get_or_init(|| self.light.extract_sun(&envlight::SunOptions::default()))
         })
     }
 
@@ -521,6 +591,60 @@ impl PyEnvironmentLight {
         Ok(PyArray1::from_vec(py, out))
     }
 
+    /// Portal sampling: one direction per point of `points` `(N, 3)` (with `u`
+    /// `(N, 2)`), through the `portals` `(K, 4, 3)` only (planar convex quads, corners
+    /// in order), in proportion to radiance; `(directions, pdf, radiance)`, a zero
+    /// direction with pdf 0 where nothing lit is seen through a portal.
+    fn sample_portal<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        u: PyReadonlyArray2<'py, f32>,
+        portals: &Bound<'py, PyAny>,
+    ) -> PyResult<Samples<'py>> {
+        let u = rows::<2>(&u, "u")?;
+        let xi = as_arrays::<2>(&u);
+        let values = rows::<3>(&points, "points")?;
+        let points = self::directions(&values, self.frame);
+        if points.len() != xi.len() {
+            return Err(PyValueError::new_err(format!(
+                "points and u must have the same length, not {} and {}",
+                points.len(),
+                xi.len()
+            )));
+        }
+        let light = self.portal_light(py, portals)?;
+        self.draw(py, xi.len(), |range, out| {
+            light.sample_batch(&points[range.clone()], &xi[range], out)
+        })
+    }
+
+    /// The portal light's pdf (per steradian) of `directions` `(N, 3)` from
+    /// `points` `(N, 3)` through `portals` `(K, 4, 3)`: 0 through no portal.
+    fn pdf_portal<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        directions: PyReadonlyArray2<'py, f32>,
+        portals: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let values = rows::<3>(&directions, "directions")?;
+        let dirs = self::directions(&values, self.frame);
+        let values = rows::<3>(&points, "points")?;
+        let points = self::directions(&values, self.frame);
+        if points.len() != dirs.len() {
+            return Err(PyValueError::new_err(format!(
+                "points and directions must have the same length, not {} and {}",
+                points.len(),
+                dirs.len()
+            )));
+        }
+        let light = self.portal_light(py, portals)?;
+        let mut out = vec![0.0f32; dirs.len()];
+        py.detach(|| light.pdf_batch(&points, &dirs, &mut out));
+        Ok(PyArray1::from_vec(py, out))
+    }
+
     /// The invariant checks of DESIGN.md §5 on this light (or, with `normal`, on
     /// its product sampler at that normal), as `envlight verify` runs them: a
     /// list of dicts with keys `check`, `value`, `threshold`, `samples`, `result`
@@ -675,6 +799,47 @@ impl PyEnvironmentLight {
             out.set_item(s.name, array)?;
         }
         Ok(out)
+    }
+
+    /// The map's sun (its brightest compact source, as a uniform disc), or `None`
+    /// when it has none (the thresholds are in the Rust docs of `envlight::sun`:
+    /// radius ≤ 5°, contrast ≥ 20, ≥ 1% of the power).
+    ///
+    /// A dict: `direction` (unit, in this light's frame, rotation applied),
+    /// `angular_radius_deg`, `solid_angle_sr`, `radiance` and `irradiance` (RGB,
+    /// scale applied; irradiance at normal incidence, `L π sin² r`),
+    /// `power_fraction` (share of `∫Y dω`), `elevation_deg` and `azimuth_deg` (of
+    /// the z-up direction), `contrast` (disc over the surrounding sky).
+    fn sun<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(sun) = self.sun_extraction(py).sun else {
+            return Ok(None);
+        };
+        let d = self.frame.z_up_to_frame(sun.direction);
+        let out = PyDict::new(py);
+        out.set_item("direction", (d.x, d.y, d.z))?;
+        out.set_item("angular_radius_deg", sun.angular_radius_deg())?;
+        out.set_item("solid_angle_sr", sun.solid_angle)?;
+        let [r, g, b] = sun.radiance;
+        out.set_item("radiance", (r, g, b))?;
+        let [r, g, b] = sun.irradiance;
+        out.set_item("irradiance", (r, g, b))?;
+        out.set_item("power_fraction", sun.power_fraction)?;
+        out.set_item("elevation_deg", sun.elevation_deg())?;
+        out.set_item("azimuth_deg", sun.azimuth_deg())?;
+        out.set_item("contrast", sun.contrast)?;
+        Ok(Some(out))
+    }
+
+    /// The light's image without its sun, as a `(height, width, 3)` float32 array:
+    /// same size and mapping, the sun's texels in-painted from the sky around it,
+    /// in the image's own units (the scale not applied); the image itself when
+    /// there is no sun. With the disc of `sun()` it reproduces the map's
+    /// irradiance at any normal that does not graze the sun.
+    fn sun_residual<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let residual = &self.sun_extraction(py).residual;
+        let (w, h) = (residual.width(), residual.height());
+        let flat: Vec<f32> = residual.texels().iter().flatten().copied().collect();
+        PyArray1::from_vec(py, flat).reshape([h, w, 3])
     }
 
     /// Width of the light's image in texels.

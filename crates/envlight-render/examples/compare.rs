@@ -71,6 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         strategies,
         equal_time,
+        equal_time_of_mis: true,
         reference_spp,
     };
     let progress = |stage: &str, done: u64, total: u64| {

@@ -25,6 +25,10 @@ pub struct CompareSettings {
     pub strategies: Vec<Strategy>,
     /// Also render every strategy for this many seconds each.
     pub equal_time: Option<f64>,
+    /// When [`Self::equal_time`] is `None`: also render every strategy for as long
+    /// as `mis` (or, without it, the slowest strategy) took at equal samples, in
+    /// the same run, so the comparison is at equal time as well.
+    pub equal_time_of_mis: bool,
     /// Samples per pixel of the `mis` reference rendered when none is given.
     pub reference_spp: u32,
 }
@@ -35,6 +39,7 @@ impl Default for CompareSettings {
             render: RenderSettings::default(),
             strategies: Strategy::ALL.to_vec(),
             equal_time: None,
+            equal_time_of_mis: false,
             reference_spp: 1024,
         }
     }
@@ -213,12 +218,21 @@ pub fn compare(
             region_pixels.push(count);
         }
     }
-    let mut entries = Vec::new();
-    let mut budgets = vec![Budget::EqualSamples];
-    if let Some(t) = settings.equal_time {
-        budgets.push(Budget::EqualTime(t));
-    }
-    for budget in budgets {
+    let mut entries: Vec<CompareEntry> = Vec::new();
+    for row in 0..2 {
+        let budget = match (row, settings.equal_time) {
+            (0, _) => Budget::EqualSamples,
+            (_, Some(t)) => Budget::EqualTime(t),
+            (_, None) if settings.equal_time_of_mis => {
+                let mis = entries.iter().find(|e| e.strategy == Strategy::Mis);
+                let slowest = entries.iter().map(|e| e.seconds).fold(0.0, f64::max);
+                match mis.map_or(slowest, |e| e.seconds) {
+                    t if t > 0.0 => Budget::EqualTime(t),
+                    _ => break,
+                }
+            }
+            (_, None) => break,
+        };
         for &strategy in &settings.strategies {
             let s = RenderSettings { strategy, ..base };
             let r = match budget {
@@ -280,21 +294,15 @@ fn seconds(t: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// `text` cut to at most `max_chars` characters, the cut marked by `..`.
+/// `text` cut to at most `max_chars` characters, the cut marked by `..` at the
+/// end (a caption's start names what it is; its end is the least important).
 fn clip(text: &str, max_chars: usize) -> String {
     if text.chars().count() <= max_chars {
         return text.to_string();
     }
     let keep = max_chars.saturating_sub(2);
-    let tail: String = text
-        .chars()
-        .rev()
-        .take(keep)
-        .collect::<Vec<_>>()
-        .into_iter()
-        .rev()
-        .collect();
-    format!("..{tail}")
+    let head: String = text.chars().take(keep).collect();
+    format!("{head}..")
 }
 
 impl Comparison {
@@ -369,12 +377,13 @@ impl Comparison {
 
     /// The contact sheet: the reference and then one tile per strategy, a row per
     /// budget, each tile with a caption band below it naming the strategy, its
-    /// samples and time, RMSE, relative MSE and RMSE relative to `mis`.
+    /// samples and time, RMSE, relative MSE and RMSE relative to `mis`, one a line
+    /// (a line too long for its tile is cut at the end, marked `..`).
     pub fn sheet(&self, exposure: f32) -> Canvas {
         let (w, h) = (self.reference.width(), self.reference.height());
         let scale = if w >= 300 { 2 } else { 1 };
         let line = (crate::font::GLYPH_HEIGHT + 3) * scale;
-        let band = 4 * line + 4 * scale;
+        let band = 5 * line + 4 * scale;
         let gap = 4;
         let budgets: Vec<Budget> = {
             let mut b: Vec<Budget> = Vec::new();
@@ -439,10 +448,12 @@ impl Comparison {
             {
                 let (x, y) = tile_origin(k + 1, row);
                 canvas.blit(x, y, w, h, &e.image.to_srgb8(exposure));
+                // One figure a line, so that none is cut on a narrow tile.
                 let mut lines = vec![
                     e.strategy.name().to_string(),
                     format!("{} spp {}s", e.spp, short(e.seconds)),
-                    format!("rmse {} relmse {}", short(e.rmse), short(e.rel_mse)),
+                    format!("rmse {}", short(e.rmse)),
+                    format!("rel mse {}", short(e.rel_mse)),
                 ];
                 if let Some(m) = mis.filter(|&m| m > 0.0) {
                     lines.push(format!("rmse/mis {}", short(e.rmse / m)));

@@ -92,6 +92,16 @@ pub enum Shape {
         /// Radius (> 0).
         radius: f32,
     },
+    /// A rectangle `corner + a·u + b·v`, `a, b ∈ [0, 1]` (`u ⟂ v`), seen from both
+    /// sides; its normal is `u × v` normalised (the walls of the `room` scene).
+    Rect {
+        /// One corner.
+        corner: Vec3,
+        /// First edge from the corner.
+        u: Vec3,
+        /// Second edge from the corner (perpendicular to `u`).
+        v: Vec3,
+    },
 }
 
 /// Where a ray meets a shape: parameter and outward geometric normal.
@@ -145,6 +155,23 @@ impl Shape {
                 (dx * dx + dy * dy <= radius * radius).then_some(ShapeHit {
                     t,
                     normal: Vec3::new(0.0, 0.0, 1.0),
+                })
+            }
+            Shape::Rect { corner, u, v } => {
+                let n = u.cross(v);
+                let dn = ray.direction.dot(n);
+                if dn == 0.0 {
+                    return None;
+                }
+                let t = (corner - ray.origin).dot(n) / dn;
+                if !(t > 0.0 && t < t_max) {
+                    return None;
+                }
+                let q = ray.at(t) - corner;
+                let (a, b) = (q.dot(u) / u.dot(u), q.dot(v) / v.dot(v));
+                ((0.0..=1.0).contains(&a) && (0.0..=1.0).contains(&b)).then(|| ShapeHit {
+                    t,
+                    normal: n * (1.0 / n.length()),
                 })
             }
         }
@@ -251,5 +278,27 @@ mod tests {
             )
         };
         assert!(hit(1.9).is_some() && hit(2.1).is_none());
+    }
+
+    #[test]
+    fn rect_respects_its_edges_from_both_sides() {
+        // The square [1, 3] × [0, 2] in the plane x = 4 (a wall of the room).
+        let r = Shape::Rect {
+            corner: Vec3::new(4.0, 1.0, 0.0),
+            u: Vec3::new(0.0, 2.0, 0.0),
+            v: Vec3::new(0.0, 0.0, 2.0),
+        };
+        let hit = |origin: Vec3, y: f32| {
+            let target = Vec3::new(4.0, y, 1.0);
+            let direction = (target - origin).normalized().unwrap();
+            r.intersect(&Ray { origin, direction }, f32::INFINITY)
+        };
+        for origin in [Vec3::new(0.0, 2.0, 1.0), Vec3::new(6.0, 2.0, 1.0)] {
+            let h = hit(origin, 1.1).expect("inside");
+            let distance = (Vec3::new(4.0, 1.1, 1.0) - origin).length();
+            assert!((h.t - distance).abs() < 1e-5, "{} vs {distance}", h.t);
+            assert!((h.normal.x.abs() - 1.0).abs() < 1e-6);
+            assert!(hit(origin, 0.9).is_none() && hit(origin, 3.1).is_none());
+        }
     }
 }

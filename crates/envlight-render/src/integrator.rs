@@ -7,9 +7,15 @@ use crate::rgb::{add, is_black, max_component, mul, scale, Rgb};
 use crate::scene::Scene;
 use crate::strategy::{CompensatedLight, Strategy};
 use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
+use envlight::portal::{Portal, PortalLight, PortalOptions, PortalPoint};
 use envlight::rng::SplitMix64;
 use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
 use std::sync::Arc;
+
+/// Cells along each side of the portal light's rectified tables: small enough that
+/// a portal's table (`12 n²` bytes) stays in cache along the paths, which sampling
+/// at a vertex is bound by (the room's sky through its openings is smooth).
+pub const PORTAL_RESOLUTION: usize = 128;
 
 /// Bounces after which Russian roulette starts.
 pub const ROULETTE_DEPTH: u32 = 3;
@@ -27,6 +33,9 @@ pub struct Integrator<'a> {
     max_depth: u32,
     compensated: Option<CompensatedLight>,
     product: Option<ProductSampler>,
+    /// The portal light over the scene's openings, for the portal strategies in a
+    /// scene that has portals.
+    portal: Option<PortalLight>,
 }
 
 /// The working state of one thread's paths for [`Integrator::li_with`]: for the
@@ -36,6 +45,17 @@ pub struct Integrator<'a> {
 #[derive(Debug, Clone)]
 pub struct Scratch<'s> {
     point: Option<ShadingPoint<'s>>,
+}
+
+/// The balance heuristic weight of a technique with density `a` against one with
+/// density `b`.
+#[inline]
+pub fn balance_heuristic(a: f32, b: f32) -> f32 {
+    if a + b > 0.0 {
+        a / (a + b)
+    } else {
+        0.0
+    }
 }
 
 /// The power heuristic (β = 2) weight of a technique with density `a` against one
@@ -54,8 +74,11 @@ impl<'a> Integrator<'a> {
     /// An integrator for `scene` under `light`. `max_depth` is the largest number of
     /// surface interactions on a path (1 = direct lighting only; 0 renders only what
     /// camera rays see directly: the environment, black objects). Builds the
-    /// compensated distribution, or the product sampler (over a copy of `light`,
-    /// `O(w h)`), when `strategy` needs it: once per render.
+    /// compensated distribution, the product sampler (over a copy of `light`,
+    /// `O(w h)`), or the portal light over the scene's portals (a copy of `light`
+    /// and `12 n²` bytes of tables per portal side seen, see [`envlight::portal`]), when
+    /// `strategy` needs it: once per render. A scene's portals that are not valid
+    /// quads are a bug in the scene: they panic here.
     pub fn new(
         scene: &'a Scene,
         light: &'a EnvironmentLight,
@@ -64,17 +87,21 @@ impl<'a> Integrator<'a> {
     ) -> Self {
         let compensated =
             (strategy == Strategy::MisCompensated).then(|| CompensatedLight::new(light));
-        // A path vertex draws one light sample, so the per-point weighing of the
-        // cut dominates: a cut of 64 nodes costs 2.4x a `mis` sample on the
-        // `diffuse` scene where the library's default 512 costs 5.5x, for an
-        // equal-spp RMSE of 0.95x `mis` against 0.91x (BENCHMARKS.md).
-        let options = ProductOptions {
-            top_nodes: Some(64),
-            ..Default::default()
-        };
         let product = strategy
             .uses_product()
-            .then(|| ProductSampler::new(Arc::new(light.clone()), options));
+            .then(|| ProductSampler::new(Arc::new(light.clone()), ProductOptions::default()));
+        let portal = (strategy.uses_portals() && !scene.portals.is_empty()).then(|| {
+            let quads: Vec<Portal> = scene
+                .portals
+                .iter()
+                .map(|&c| Portal::new(c).expect("the scene's portals are valid quads"))
+                .collect();
+            let options = PortalOptions {
+                resolution: Some(PORTAL_RESOLUTION),
+            };
+            PortalLight::new(Arc::new(light.clone()), &quads, options)
+                .expect("the scene has at most 8 portals")
+        });
         Self {
             scene,
             light,
@@ -82,6 +109,7 @@ impl<'a> Integrator<'a> {
             max_depth,
             compensated,
             product,
+            portal,
         }
     }
 
@@ -107,10 +135,19 @@ impl<'a> Integrator<'a> {
     /// strategies without one); `point` is the current vertex's shading point for
     /// the product strategies.
     #[inline]
-    fn light_technique_pdf(&self, d: Vec3, point: Option<&ShadingPoint>) -> f32 {
+    fn light_technique_pdf(
+        &self,
+        d: Vec3,
+        point: Option<&ShadingPoint>,
+        portal: Option<&PortalPoint>,
+    ) -> f32 {
         match (&self.compensated, self.strategy) {
             (Some(c), _) => c.pdf(d),
             (None, Strategy::Mis | Strategy::Light) => self.light.pdf(d),
+            (None, Strategy::Portal | Strategy::MisPortal) => match portal {
+                Some(p) => p.pdf(d),
+                None => self.light.pdf(d),
+            },
             (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
             (None, Strategy::Product | Strategy::MisProduct) => point.map_or(0.0, |p| p.pdf(d)),
             (None, _) => 0.0,
@@ -124,6 +161,7 @@ impl<'a> Integrator<'a> {
         &self,
         xi: [f32; 2],
         point: Option<&ShadingPoint>,
+        portal: Option<&PortalPoint>,
     ) -> Option<(Vec3, f32, Rgb)> {
         match self.strategy {
             Strategy::Bsdf => None,
@@ -143,6 +181,11 @@ impl<'a> Integrator<'a> {
             Strategy::Product | Strategy::MisProduct => point
                 .and_then(|p| p.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
+            Strategy::Portal | Strategy::MisPortal => match portal {
+                Some(p) => p.sample(xi),
+                None => self.light.sample(xi),
+            }
+            .map(|s| (s.direction, s.pdf, s.radiance)),
         }
     }
 
@@ -166,6 +209,11 @@ impl<'a> Integrator<'a> {
             "a scratch from another integrator"
         );
         let mis = self.strategy.is_mis();
+        let heuristic = if self.strategy == Strategy::MisPortal {
+            balance_heuristic
+        } else {
+            power_heuristic
+        };
         let Some(mut hit) = self.scene.intersect(ray, f32::INFINITY) else {
             return self.light.radiance(ray.direction);
         };
@@ -192,12 +240,18 @@ impl<'a> Integrator<'a> {
                 point.set_factor(&bsdf.product_factor(normal, -ray.direction));
             }
             let point = scratch.point.as_ref();
+            // The portals as seen from this vertex (their windows and powers; on the
+            // stack, no allocation).
+            let portal_point = self.portal.as_ref().map(|pl| pl.at(hit.point));
+            let portal = portal_point.as_ref();
 
             // Next-event estimation: a direction from the light technique, weighted
             // against the BSDF technique when combining. The estimate is the true
             // `f cos θi L / p`, whatever target the light technique sampled.
             let xi_light = [rng.next_f32(), rng.next_f32()];
-            if let Some((wi_world, light_pdf, le)) = self.sample_light_technique(xi_light, point) {
+            if let Some((wi_world, light_pdf, le)) =
+                self.sample_light_technique(xi_light, point, portal)
+            {
                 let wi = frame.to_local(wi_world);
                 if wi.z > 0.0 && !is_black(le) {
                     let f = bsdf.eval(wo, wi);
@@ -207,7 +261,7 @@ impl<'a> Integrator<'a> {
                             .occluded(&Ray::spawn(hit.point, normal, wi_world))
                     {
                         let weight = if mis {
-                            power_heuristic(light_pdf, bsdf.pdf(wo, wi))
+                            heuristic(light_pdf, bsdf.pdf(wo, wi))
                         } else {
                             1.0
                         };
@@ -244,7 +298,7 @@ impl<'a> Integrator<'a> {
                 None => {
                     if self.strategy.counts_escaped_bsdf_rays() {
                         let weight = if mis {
-                            power_heuristic(bs.pdf, self.light_technique_pdf(wi_world, point))
+                            heuristic(bs.pdf, self.light_technique_pdf(wi_world, point, portal))
                         } else {
                             1.0
                         };

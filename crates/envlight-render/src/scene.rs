@@ -72,10 +72,13 @@ pub struct Scene {
     pub camera: Camera,
     /// Everything that can be hit (intersection is brute force: scenes are tiny).
     pub objects: Vec<Object>,
+    /// The openings the environment is seen through, as quads (four corners in
+    /// order), for the portal strategies; empty for an open scene.
+    pub portals: Vec<[Vec3; 4]>,
 }
 
 /// Names accepted by [`Scene::builtin`].
-pub const SCENE_NAMES: [&str; 3] = ["balls", "diffuse", "furnace"];
+pub const SCENE_NAMES: [&str; 4] = ["balls", "diffuse", "furnace", "room"];
 
 /// Albedo of the spheres in the `diffuse` scene.
 pub const DIFFUSE_SPHERE_ALBEDO: f32 = 0.8;
@@ -100,12 +103,191 @@ impl Scene {
     /// - `furnace`: one unit diffuse sphere of albedo [`FURNACE_ALBEDO`], nothing
     ///   else. Under a constant map of radiance 1 every sphere pixel is 0.5 and every
     ///   background pixel 1.
+    /// - `room`: a closed room `[0, 4] × [0, 3] × [0, 2.5]` lit only through two
+    ///   openings, which are its [`Scene::portals`]: a window in the wall x = 4
+    ///   (y ∈ [0.9, 2.1], z ∈ [0.8, 1.9], facing +x, away from the `sunrise` map's
+    ///   low sun: the room is lit by the sky alone, the case where sampling the
+    ///   whole map wastes its samples on the sun behind the walls) and a skylight
+    ///   in the ceiling (x ∈ [1.6, 2.8], y ∈ [1, 2]) at the foot of a shaft 0.5
+    ///   high with black walls, whose top (z = 3) is the portal (the shaft keeps the
+    ///   low sun out).
+    ///   Diffuse walls (ρ = 0.7), a checkered floor, a white diffuse sphere, a rough copper
+    ///   sphere and a blue plastic sphere; the camera stands in a corner.
     pub fn builtin(name: &str) -> Option<Scene> {
         match name {
             "balls" => Some(Self::balls()),
             "diffuse" => Some(Self::diffuse()),
             "furnace" => Some(Self::furnace()),
+            "room" => Some(Self::room()),
             _ => None,
+        }
+    }
+
+    /// The window of the `room` scene (a portal), corners in order.
+    pub const ROOM_WINDOW: [Vec3; 4] = [
+        Vec3::new(4.0, 0.9, 0.8),
+        Vec3::new(4.0, 2.1, 0.8),
+        Vec3::new(4.0, 2.1, 1.9),
+        Vec3::new(4.0, 0.9, 1.9),
+    ];
+
+    /// The skylight of the `room` scene (a portal), corners in order.
+    pub const ROOM_SKYLIGHT: [Vec3; 4] = [
+        Vec3::new(1.6, 1.0, 3.0),
+        Vec3::new(2.8, 1.0, 3.0),
+        Vec3::new(2.8, 2.0, 3.0),
+        Vec3::new(1.6, 2.0, 3.0),
+    ];
+
+    fn room() -> Scene {
+        const SIZE: [f32; 3] = [4.0, 3.0, 2.5];
+        // Walls overlap at the room's edges (no cracks for rays to leak through) and
+        // reach 1e-4 into the openings, so every escaping ray passes through a
+        // portal (an opening larger than its portal would leak unsampled light).
+        const SEAL: f32 = 1e-3;
+        const LIP: f32 = 1e-4;
+        let wall = Material::Uniform(Bsdf::Diffuse {
+            albedo: [0.7, 0.7, 0.7],
+        });
+        // An axis-aligned rectangle in the plane `axis = value`, spanning `a` and `b`
+        // along the two other axes (in x, y, z order).
+        let rect = |name: &'static str, axis: usize, value: f32, a: [f32; 2], b: [f32; 2]| {
+            let (i, j) = match axis {
+                0 => (1, 2),
+                1 => (0, 2),
+                _ => (0, 1),
+            };
+            let mut corner = [0.0f32; 3];
+            corner[axis] = value;
+            corner[i] = a[0];
+            corner[j] = b[0];
+            let mut u = [0.0f32; 3];
+            u[i] = a[1] - a[0];
+            let mut v = [0.0f32; 3];
+            v[j] = b[1] - b[0];
+            Object {
+                name,
+                shape: Shape::Rect {
+                    corner: Vec3::from(corner),
+                    u: Vec3::from(u),
+                    v: Vec3::from(v),
+                },
+                material: wall,
+            }
+        };
+        let full = |axis: usize| {
+            let (i, j) = match axis {
+                0 => (1, 2),
+                1 => (0, 2),
+                _ => (0, 1),
+            };
+            ([-SEAL, SIZE[i] + SEAL], [-SEAL, SIZE[j] + SEAL])
+        };
+        // A wall with a rectangular opening `ha × hb`: four pieces around it.
+        let holed = |name: &'static str, axis: usize, value: f32, ha: [f32; 2], hb: [f32; 2]| {
+            let (a, b) = full(axis);
+            vec![
+                rect(name, axis, value, a, [b[0], hb[0] + LIP]),
+                rect(name, axis, value, a, [hb[1] - LIP, b[1]]),
+                rect(name, axis, value, [a[0], ha[0] + LIP], hb),
+                rect(name, axis, value, [ha[1] - LIP, a[1]], hb),
+            ]
+        };
+        let mut objects = Vec::new();
+        let w = Self::ROOM_WINDOW;
+        objects.extend(holed(
+            "window wall",
+            0,
+            SIZE[0],
+            [w[0].y, w[2].y],
+            [w[0].z, w[2].z],
+        ));
+        let k = Self::ROOM_SKYLIGHT;
+        objects.extend(holed(
+            "ceiling",
+            2,
+            SIZE[2],
+            [k[0].x, k[2].x],
+            [k[0].y, k[2].y],
+        ));
+        // The skylight's shaft, from the ceiling's hole up to the portal at its top:
+        // rays leave through the portal only, and the low sun cannot get in.
+        let shaft = [SIZE[2] - SEAL, k[0].z];
+        // Its walls are black: the low sun reaches a strip of them, which would
+        // otherwise light the room by a bright, tiny indirect source.
+        let (ys, xs) = (
+            [k[0].y - SEAL, k[2].y + SEAL],
+            [k[0].x - SEAL, k[2].x + SEAL],
+        );
+        let black = Material::Uniform(Bsdf::Diffuse { albedo: [0.0; 3] });
+        for (axis, value, span) in [
+            (0, k[0].x, ys),
+            (0, k[2].x, ys),
+            (1, k[0].y, xs),
+            (1, k[2].y, xs),
+        ] {
+            let mut side = rect("shaft", axis, value, span, shaft);
+            side.material = black;
+            objects.push(side);
+        }
+        let (a, b) = full(0);
+        objects.push(rect("back wall", 0, 0.0, a, b));
+        let (a, b) = full(1);
+        objects.push(rect("wall", 1, 0.0, a, b));
+        objects.push(rect("wall", 1, SIZE[1], a, b));
+        let (a, b) = full(2);
+        let mut floor = rect("floor", 2, 0.0, a, b);
+        floor.material = Material::Checker {
+            even: [0.6, 0.55, 0.5],
+            odd: [0.3, 0.27, 0.25],
+            size: 0.5,
+        };
+        objects.push(floor);
+        let sphere = |name: &'static str, c: [f32; 3], radius: f32, bsdf: Bsdf| Object {
+            name,
+            shape: Shape::Sphere {
+                center: Vec3::from(c),
+                radius,
+            },
+            material: Material::Uniform(bsdf),
+        };
+        objects.push(sphere(
+            "diffuse",
+            [1.6, 1.9, 0.5],
+            0.5,
+            Bsdf::Diffuse {
+                albedo: [0.8, 0.8, 0.8],
+            },
+        ));
+        objects.push(sphere(
+            "copper",
+            [2.7, 1.0, 0.35],
+            0.35,
+            Bsdf::Conductor {
+                alpha: 0.25,
+                eta: [0.200, 0.924, 1.102],
+                k: [3.912, 2.452, 2.142],
+            },
+        ));
+        objects.push(sphere(
+            "plastic",
+            [1.0, 0.9, 0.3],
+            0.3,
+            Bsdf::Plastic {
+                albedo: [0.1, 0.25, 0.6],
+                alpha: 0.08,
+                eta: 1.5,
+            },
+        ));
+        Scene {
+            name: "room".into(),
+            camera: Camera {
+                position: Vec3::new(0.25, 0.3, 1.5),
+                look_at: Vec3::new(3.0, 1.8, 1.0),
+                vfov_degrees: 70.0,
+            },
+            objects,
+            portals: vec![Self::ROOM_WINDOW, Self::ROOM_SKYLIGHT],
         }
     }
 
@@ -179,6 +361,7 @@ impl Scene {
             name: "balls".into(),
             camera: Self::ground_camera(),
             objects,
+            portals: Vec::new(),
         }
     }
 
@@ -213,6 +396,7 @@ impl Scene {
             name: "diffuse".into(),
             camera: Self::ground_camera(),
             objects,
+            portals: Vec::new(),
         }
     }
 
@@ -234,6 +418,7 @@ impl Scene {
                     albedo: [FURNACE_ALBEDO; 3],
                 }),
             }],
+            portals: Vec::new(),
         }
     }
 

@@ -18,6 +18,8 @@ use std::str::FromStr;
 /// | `mis-compensated` | compensated distribution, power heuristic | power heuristic |
 /// | `product` | product sampling of `L ×` the BSDF's factor, weight 1 | weight 0 |
 /// | `mis-product` | product sampling, power heuristic | power heuristic |
+/// | `portal` | the portal light at the vertex, weight 1 | weight 0 |
+/// | `mis-portal` | the portal light at the vertex, balance heuristic | balance heuristic |
 ///
 /// The product strategies draw the shadow ray's direction at each vertex from
 /// [`envlight::ProductSampler`] with the target `L(ω) f(ω)`, where the factor `f` is
@@ -30,6 +32,17 @@ use std::str::FromStr;
 /// of the same shading point. Both stay unbiased because the product pdf is
 /// positive wherever `L(ω) max(0, n·ω) > 0` (every factor is positive over the whole
 /// upper hemisphere).
+///
+/// The portal strategies sample the light through the scene's openings
+/// ([`Scene::portals`](crate::Scene::portals)) with an
+/// [`envlight::portal::PortalLight`] at each vertex: only directions through an
+/// opening, in proportion to the map's luminance seen through it, with the exact
+/// mixture pdf of that vertex in both MIS weights. In a closed room every ray that
+/// escapes passes through an opening, so the portal pdf is positive wherever the
+/// unoccluded integrand is, and `portal` alone is unbiased. A scene without
+/// portals has no openings to restrict to: there the portal strategies sample the
+/// whole light (`portal` as `light`, `mis-portal` as `mis` with the balance
+/// heuristic).
 ///
 /// Camera rays that escape always see `light.radiance(ω)`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -51,11 +64,17 @@ pub enum Strategy {
     /// Product sampling and BSDF sampling combined by the power heuristic (β = 2),
     /// both weights with the product pdf at the shading point.
     MisProduct,
+    /// Sampling through the scene's portals only (like `Light`, BSDF-sampled rays
+    /// that escape count 0).
+    Portal,
+    /// Portal sampling and BSDF sampling combined by the balance heuristic, both
+    /// weights with the portal pdf at the shading point.
+    MisPortal,
 }
 
 impl Strategy {
     /// All strategies, in the order reports list them.
-    pub const ALL: [Strategy; 7] = [
+    pub const ALL: [Strategy; 9] = [
         Strategy::Uniform,
         Strategy::Bsdf,
         Strategy::Light,
@@ -63,6 +82,8 @@ impl Strategy {
         Strategy::MisCompensated,
         Strategy::Product,
         Strategy::MisProduct,
+        Strategy::Portal,
+        Strategy::MisPortal,
     ];
 
     /// The command-line name.
@@ -75,6 +96,8 @@ impl Strategy {
             Strategy::MisCompensated => "mis-compensated",
             Strategy::Product => "product",
             Strategy::MisProduct => "mis-product",
+            Strategy::Portal => "portal",
+            Strategy::MisPortal => "mis-portal",
         }
     }
 
@@ -89,8 +112,14 @@ impl Strategy {
     pub fn is_mis(self) -> bool {
         matches!(
             self,
-            Strategy::Mis | Strategy::MisCompensated | Strategy::MisProduct
+            Strategy::Mis | Strategy::MisCompensated | Strategy::MisProduct | Strategy::MisPortal
         )
+    }
+
+    /// Whether the light technique is the portal light at the shading point.
+    #[inline]
+    pub fn uses_portals(self) -> bool {
+        matches!(self, Strategy::Portal | Strategy::MisPortal)
     }
 
     /// Whether the light technique is the product sampler at the shading point.
@@ -110,7 +139,7 @@ impl fmt::Display for Strategy {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown strategy '{0}' (expected one of: uniform, bsdf, light, mis, mis-compensated, \
-     product, mis-product)"
+     product, mis-product, portal, mis-portal)"
 )]
 pub struct UnknownStrategy(pub String);
 

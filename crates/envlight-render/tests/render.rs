@@ -158,6 +158,7 @@ fn comparison_reports_every_strategy_and_draws_a_sheet() {
             ..Default::default()
         },
         equal_time: Some(0.05),
+        equal_time_of_mis: false,
         reference_spp: 16,
         ..Default::default()
     };

@@ -3,7 +3,7 @@
 //! irradiance integrand `g = Y·max(0, n·ω)` with the product sampler's pdf and
 //! with the light's own, next to the light's own efficiency for `Y` alone.
 //!
-//! `cargo run --release -p envlight-verify --example product_efficiency [-- --patches PW,PH] [--top N] [--equal-area]`
+//! `cargo run --release -p envlight-verify --example product_efficiency [-- --patches PW,PH] [--grid N] [--random N] [--equal-area]`
 //! (maps from `../shared/envmaps/`, plus `builtin:sky`).
 
 use envlight::light::{Density, Mapping};
@@ -29,9 +29,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         None => None,
     };
-    let top_nodes = match args.iter().position(|a| a == "--top") {
-        Some(k) => Some(args.get(k + 1).ok_or("--top N")?.parse::<usize>()?),
+    let normal_grid = match args.iter().position(|a| a == "--grid") {
+        Some(k) => Some(args.get(k + 1).ok_or("--grid N")?.parse::<usize>()?),
         None => None,
+    };
+    let random = match args.iter().position(|a| a == "--random") {
+        Some(k) => args.get(k + 1).ok_or("--random N")?.parse::<usize>()?,
+        None => 0,
     };
     let mapping = if args.iter().any(|a| a == "--equal-area") {
         Mapping::EqualArea
@@ -40,6 +44,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
     let mut maps: Vec<(String, EnvImage)> = vec![("builtin:sky".into(), builtin::sky(1024, 512))];
+    let only: Option<Vec<String>> = std::env::var("MAPS")
+        .ok()
+        .map(|m| m.split(',').map(String::from).collect());
     for file in [
         "sunrise.exr",
         "city.exr",
@@ -48,6 +55,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "night.exr",
         "colorful_studio_2k.hdr",
     ] {
+        if only.as_ref().is_some_and(|o| !o.iter().any(|x| x == file)) {
+            continue;
+        }
         match load(&dir.join(file), &LoadOptions::default()) {
             Ok(l) => maps.push((file.into(), l.image)),
             Err(e) => eprintln!("skipping {file}: {e}"),
@@ -69,28 +79,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 },
             )?);
             let own =
-                efficiency(light.as_ref(), &Integrand::luminance(), Reference::Midpoint).efficiency;
+                efficiency(light.as_ref(), &Integrand::luminance(), Reference::Checked).efficiency;
             let sampler = ProductSampler::new(
                 light.clone(),
                 ProductOptions {
                     patches,
-                    top_nodes,
+                    normal_grid,
                     ..Default::default()
                 },
             );
             let brightest = light.brightest().1;
             let k = 1.0 / 3f32.sqrt();
-            for (label, n) in [
-                ("up", Vec3::new(0.0, 0.0, 1.0)),
-                ("down", Vec3::new(0.0, 0.0, -1.0)),
-                ("towards", brightest),
-                ("away", -brightest),
-                ("oblique", Vec3::new(k, -k, k)),
-            ] {
+            let mut normals = vec![
+                ("up".to_string(), Vec3::new(0.0, 0.0, 1.0)),
+                ("down".to_string(), Vec3::new(0.0, 0.0, -1.0)),
+                ("towards".to_string(), brightest),
+                ("away".to_string(), -brightest),
+                ("oblique".to_string(), Vec3::new(k, -k, k)),
+            ];
+            for i in 0..random {
+                let xi = envlight::rng::xi_2d(77, i as u64);
+                normals.push((format!("random {i}"), envlight::math::uniform_sphere(xi)));
+            }
+            for (label, n) in normals {
                 let at = AtShadingPoint::new(&sampler, Factor::cosine(n));
                 let g = at.integrand();
-                let product = efficiency(&at, &g, Reference::Midpoint).efficiency;
-                let alone = efficiency(light.as_ref(), &g, Reference::Midpoint).efficiency;
+                let product = efficiency(&at, &g, Reference::Checked).efficiency;
+                let alone = efficiency(light.as_ref(), &g, Reference::Checked).efficiency;
                 let ratio = product / own;
                 worst = worst.min(ratio);
                 let gain = (1.0 / alone - 1.0) / (1.0 / product - 1.0);

@@ -46,6 +46,7 @@ mod checks;
 mod integrand;
 pub mod maps;
 mod param;
+mod portal;
 mod product;
 mod quadrature;
 mod report;
@@ -67,6 +68,10 @@ pub use checks::unbiasedness::{
 pub use checks::warp::{chi_square_warp, WarpChiSquare};
 pub use integrand::Integrand;
 pub use param::{direction_at, sphere_to_square, square_to_sphere, uv_of, Param};
+pub use portal::{
+    assert_portal_invariants, run_portal, AtPortalPoint, PortalConfig, PortalReport, PortalVariant,
+    Quad, PORTAL_EDGE_BAND,
+};
 pub use product::AtShadingPoint;
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};

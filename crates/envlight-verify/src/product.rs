@@ -6,7 +6,7 @@ use envlight::{EnvironmentLight, Factor, ProductSampler, ShadingPoint, Vec3};
 
 /// [`ProductSampler`] conditioned on one [`Factor`]: what the checks see of a
 /// renderer's shading point. Its density follows [`Self::integrand`],
-/// `Y(L(ω)) · f(ω)`; it is piecewise constant on the light's own cell grid, which
+/// `Y(L(ω)) · f(ω)`; within each patch it follows the light's own density over
 /// it reports as its [`Grid`].
 pub struct AtShadingPoint<'a> {
     point: ShadingPoint<'a>,
@@ -24,10 +24,10 @@ impl<'a> AtShadingPoint<'a> {
         }
     }
 
-    /// `Σw`, the sum of the patch weights: 0 when nothing the surface sees is lit
-    /// (then nothing is sampled and the pdf is 0 everywhere).
-    pub fn weight_sum(&self) -> f64 {
-        self.point.weight_sum()
+    /// False when nothing the surface sees is lit (then nothing is sampled and
+    /// the pdf is 0 everywhere).
+    pub fn samples_anything(&self) -> bool {
+        self.point.samples_anything()
     }
 
     /// The light behind the sampler.
@@ -56,10 +56,11 @@ impl<'a> AtShadingPoint<'a> {
 impl SphereSampler for AtShadingPoint<'_> {
     fn name(&self) -> String {
         format!(
-            "product {:?} with {}x{} patches over {}",
+            "product {:?} with {}x{} patches ({}) over {}",
             self.factor,
             self.sampler.patches()[0],
             self.sampler.patches()[1],
+            self.sampler.density().name(),
             SphereSampler::name(self.light())
         )
     }

@@ -60,12 +60,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     println!("light sample: {light_sample:.1} ns; light sample + pdf: {light_sample_pdf:.1} ns");
 
-    for top_nodes in [64, 128, 256, 512, 1024] {
+    for (grid, patches) in [
+        (8, [128, 64]),
+        (16, [64, 32]),
+        (16, [128, 64]),
+        (32, [128, 64]),
+    ] {
         let options = ProductOptions {
-            top_nodes: Some(top_nodes),
+            normal_grid: Some(grid),
+            patches: Some(patches),
             ..Default::default()
         };
+        let started = Instant::now();
         let sampler = ProductSampler::new(light.clone(), options);
+        let build_ms = started.elapsed().as_secs_f64() * 1e3;
         let mut point = sampler.at(&factors[0]);
         let fresh = best(|| {
             let start = Instant::now();
@@ -102,9 +110,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
         });
         println!(
-            "cut {top_nodes:>4} ({} nodes): product at + sample + pdf {fresh:.0} ns ({:.1}x light sample), \
+            "normal grid {grid:>2}, {}x{} patches ({} tables, {:.1} MB, built in {build_ms:.0} ms): \
+             product at + sample + pdf {fresh:.0} ns ({:.1}x light sample), \
              point reused for 16 samples {reused:.0} ns ({:.1}x), batch {batch:.0} ns ({:.1}x)",
-            sampler.cut_len(),
+            patches[0],
+            patches[1],
+            sampler.table_count(),
+            sampler.memory_bytes() as f64 / 1e6,
             fresh / light_sample,
             reused / light_sample,
             batch / light_sample

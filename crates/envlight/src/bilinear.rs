@@ -489,7 +489,7 @@ fn check_nodes(axis: &str, nodes: &[f64]) -> Result<()> {
 /// Written with selects and no early return, so that a loop over lanes
 /// vectorizes ([`BilinearDistribution2D::sample_block`]).
 #[inline(always)]
-fn sample_linear(xi: f64, a: f64, b: f64) -> f64 {
+pub(crate) fn sample_linear(xi: f64, a: f64, b: f64) -> f64 {
     let denominator = a + ((1.0 - xi) * a * a + xi * b * b).sqrt();
     let x = (xi * (a + b) / denominator).clamp(0.0, ONE_MINUS_EPSILON_F64);
     // A zero denominator is a = 0 and ξ b² = 0: the density's zero end.

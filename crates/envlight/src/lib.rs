@@ -43,8 +43,10 @@ pub mod light;
 pub mod load;
 pub mod mapping;
 pub mod math;
+pub mod portal;
 pub mod product;
 pub mod rng;
+pub mod sun;
 
 pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};
@@ -52,6 +54,7 @@ pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
 pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
+pub use sun::{Sun, SunExtraction, SunOptions};
 
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
 #[doc = include_str!("../../../README.md")]

@@ -6,13 +6,15 @@ use std::io::Write;
 use std::time::Instant;
 
 use anyhow::Context;
-use envlight::{EnvironmentLight, Vec3};
+use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, Vec3};
 use serde_json::json;
+use std::sync::Arc;
 
 use super::Outcome;
 use crate::device::DeviceArgs;
 use crate::light_args::LightArgs;
 use crate::output::Output;
+use crate::shading::NormalArgs;
 
 /// Arguments of `envlight bench`.
 #[derive(Debug, clap::Args)]
@@ -32,6 +34,13 @@ equal-area from a lat-long map, the resampling is part of build_ms).\n\n\
 With --json, one object with exactly the keys width, height (of the map as read), threads, load_ms, \
 build_ms, build_ms_1thread, floor_ms, sample_ns, pdf_ns, radiance_ns, \
 batch_samples_per_s, bytes_per_texel (all numbers).\n\n\
+With --normal X,Y,Z, also the product sampler at a surface with that normal (light × \
+max(0, n·ω), DESIGN.md §6a), on one thread: product_point_ns (a new shading point, one \
+sample and one pdf: what a renderer pays per shading point), product_sample_ns and \
+product_pdf_ns (a point reused; pdfs of the same random directions as pdf_ns), \
+product_build_ms (building the product sampler on all threads, fastest of --repeat, \
+next to build_ms) and product_bytes (its tables, the light's aside); the JSON object \
+gets these keys too.\n\n\
 With --device gpu the queries run on the GPU instead, --queries at a time (the library's \
 WGSL module through wgpu), and the figures are per pass, fastest of --repeat: for \
 sample (ξ uploaded), sample_seeded (ξ drawn on the device), pdf and radiance, the \
@@ -49,6 +58,9 @@ pub struct Args {
 
     #[command(flatten)]
     device: DeviceArgs,
+
+    #[command(flatten)]
+    normal: NormalArgs,
 
     /// Print one JSON object instead of the readable table.
     #[arg(long)]
@@ -182,6 +194,17 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             black_box(&out_samples);
         }));
     let bytes_per_texel = light.sampling_bytes() as f64 / light_texels as f64;
+    let product = match args.normal.normal {
+        Some(normal) => Some(measure_product(
+            light,
+            normal,
+            &xi,
+            &dirs,
+            args.repeat,
+            &one_thread,
+        )),
+        None => None,
+    };
 
     let mut out = Output::create(None)?;
     let text = if args.json {
@@ -199,6 +222,14 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             "batch_samples_per_s": batch_samples_per_s,
             "bytes_per_texel": bytes_per_texel,
         });
+        let mut value = value;
+        if let (Some(p), Some(object)) = (&product, value.as_object_mut()) {
+            object.insert("product_point_ns".into(), json!(p.point_ns));
+            object.insert("product_sample_ns".into(), json!(p.sample_ns));
+            object.insert("product_pdf_ns".into(), json!(p.pdf_ns));
+            object.insert("product_build_ms".into(), json!(p.build_ms));
+            object.insert("product_bytes".into(), json!(p.bytes));
+        }
         format!("{value}\n")
     } else {
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
@@ -229,7 +260,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
              pdf, batch        {pdf_batch_ns:>10.1} ns   (per direction, 1 thread)\n\
              radiance, batch   {radiance_batch_ns:>10.1} ns   (per direction, 1 thread)\n\
              batch sample      {:>10.2} M/s  (all threads)\n\
-             sampling data     {bytes_per_texel:>10.2} bytes per texel\n",
+             sampling data     {bytes_per_texel:>10.2} bytes per texel\n{}",
             loaded.name,
             image.width(),
             image.height(),
@@ -242,11 +273,113 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             ratio(build_ms_1thread, floor_ms),
             loaded.build_ms,
             batch_samples_per_s / 1e6,
+            product
+                .as_ref()
+                .map_or(String::new(), |p| p.table(sample_ns, pdf_ns, build_ms)),
         )
     };
     out.write_all(text.as_bytes())?;
     out.finish()?;
     Ok(Outcome::Success)
+}
+
+/// The product sampler's figures of `--normal`.
+struct ProductFigures {
+    normal: Vec3,
+    point_ns: f64,
+    sample_ns: f64,
+    pdf_ns: f64,
+    build_ms: f64,
+    bytes: usize,
+}
+
+impl ProductFigures {
+    /// The readable table's lines, with ratios to the light's own figures.
+    fn table(&self, sample_ns: f64, pdf_ns: f64, build_ms: f64) -> String {
+        let n = self.normal;
+        format!(
+            "product at normal ({:.3}, {:.3}, {:.3}), 1 thread:\n\
+             \x20 point+sample+pdf {:>10.1} ns   ({:.2}x a light sample)\n\
+             \x20 sample           {:>10.1} ns   ({:.2}x)\n\
+             \x20 pdf              {:>10.1} ns   ({:.2}x a light pdf)\n\
+             \x20 build            {:>10.1} ms   ({:.2}x the light's), {:.1} MB\n",
+            n.x,
+            n.y,
+            n.z,
+            self.point_ns,
+            self.point_ns / sample_ns,
+            self.sample_ns,
+            self.sample_ns / sample_ns,
+            self.pdf_ns,
+            self.pdf_ns / pdf_ns,
+            self.build_ms,
+            self.build_ms / build_ms,
+            self.bytes as f64 / 1e6,
+        )
+    }
+}
+
+/// Times the product sampler at `normal` (see `--help`): queries on `one_thread`,
+/// the fastest of `repeat` passes; builds on all threads.
+fn measure_product(
+    light: &EnvironmentLight,
+    normal: Vec3,
+    xi: &[[f32; 2]],
+    dirs: &[Vec3],
+    repeat: u32,
+    one_thread: &rayon::ThreadPool,
+) -> ProductFigures {
+    let shared = Arc::new(light.clone());
+    let mut build_ms = f64::INFINITY;
+    let mut sampler = None;
+    for _ in 0..repeat {
+        let started = Instant::now();
+        let built = ProductSampler::new(Arc::clone(&shared), ProductOptions::default());
+        build_ms = build_ms.min(started.elapsed().as_secs_f64() * 1e3);
+        sampler = Some(black_box(built));
+    }
+    let sampler = sampler.expect("repeat is at least 1");
+    let factor = Factor::cosine(normal);
+    let best_ns = |pass: &dyn Fn() -> f32| {
+        (0..repeat)
+            .map(|_| {
+                let started = Instant::now();
+                black_box(pass());
+                started.elapsed().as_secs_f64() * 1e9 / xi.len() as f64
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let digest = |s: envlight::LightSample| s.pdf + s.direction.x + s.radiance[1];
+    let (point_ns, sample_ns, pdf_ns) = one_thread.install(|| {
+        // A new shading point per query: `at` maps the normal into the table
+        // grid from scratch every time (nothing is cached between points).
+        let point_ns = best_ns(&|| {
+            xi.iter()
+                .map(|&x| {
+                    let point = sampler.at(black_box(&factor));
+                    point
+                        .sample(x)
+                        .map_or(0.0, |s| point.pdf(s.direction) + digest(s))
+                })
+                .sum()
+        });
+        let point = sampler.at(&factor);
+        let sample_ns = best_ns(&|| {
+            xi.iter()
+                .map(|&x| point.sample(x).map_or(0.0, digest))
+                .sum()
+        });
+        let pdf_ns = best_ns(&|| dirs.iter().map(|&d| point.pdf(d)).sum());
+        (point_ns, sample_ns, pdf_ns)
+    });
+    ProductFigures {
+        normal,
+        point_ns,
+        sample_ns,
+        pdf_ns,
+        build_ms,
+        bytes: sampler.memory_bytes(),
+    }
 }
 
 /// One query's fastest pass on the GPU.

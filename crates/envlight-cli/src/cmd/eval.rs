@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::device::DeviceArgs;
-use crate::light_args::LightArgs;
+use crate::light_args::{LightArgs, PortalArgs};
 use crate::output::{open_input, write_bytes, Output};
 use crate::progress::Progress;
 use crate::shading::{product_sampler, Density, NormalArgs};
@@ -35,7 +35,8 @@ normalised (it need not be unit length) and must be finite and non-zero.\n\n\
 Output: CSV with the header line exactly `x,y,z,pdf,r,g,b`, then one row per input row, \
 in order: the normalised world-space direction, the solid-angle pdf (sr⁻¹) with which \
 `envlight sample` draws it (with --normal, the product sampler's pdf for that surface \
-normal), and the radiance arriving from it. A bad row stops the \
+normal; with --portal and --at, the portal light's pdf at that point, 0 for a direction \
+through no portal), and the radiance arriving from it. A bad row stops the \
 command with an error naming its line; with -o no output file is left behind. With \
 --device gpu the pdf and radiance are computed on the GPU.\n\n",
     crate::conventions!()
@@ -46,6 +47,9 @@ pub struct Args {
 
     #[command(flatten)]
     normal: NormalArgs,
+
+    #[command(flatten)]
+    portal: PortalArgs,
 
     #[command(flatten)]
     device: DeviceArgs,
@@ -61,6 +65,8 @@ pub struct Args {
 
 /// Runs `envlight eval`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
+    let (normal, gpu) = (args.normal.normal.is_some(), args.device.is_gpu());
+    args.portal.requested(normal, gpu)?;
     let (mut input, source): (Box<dyn BufRead>, String) = if args.dirs.as_os_str() == "-" {
         (Box::new(std::io::stdin().lock()), "<stdin>".to_string())
     } else {
@@ -82,6 +88,12 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let light = &loaded.light;
     let product = product_sampler(light, args.normal.normal);
     let density = Density::new(light, product.as_ref(), args.normal.normal);
+    let portals = args.portal.build(light, normal, gpu)?;
+    let portal_point = portals.as_ref().map(|(pl, at)| pl.at(*at));
+    let pdf = |d: Vec3| match &portal_point {
+        Some(point) => point.pdf(d),
+        None => density.pdf(d),
+    };
     let gpu = args.device.open(light, args.normal.normal)?;
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
@@ -109,9 +121,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             None => tasks
                 .map(|first| {
                     let directions = parse_lines(&columns, &batch, range(first), &source)?;
-                    let rows = directions
-                        .iter()
-                        .map(|&d| (d, density.pdf(d), light.radiance(d)));
+                    let rows = directions.iter().map(|&d| (d, pdf(d), light.radiance(d)));
                     Ok(format_rows(rows))
                 })
                 .collect(),

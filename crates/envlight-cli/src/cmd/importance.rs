@@ -34,7 +34,10 @@ directions `envlight sample` would draw (same --seed) are drawn as magenta dots 
 panels. With --normal the lower panel is the product sampler's density for a surface \
 with that normal (radiance × max(0, n·ω), DESIGN.md §6a), and the dots its samples. \
 Each pixel is the solid-angle weighted mean of radiance and pdf over points in \
-it, enough to see every texel of maps wider than --width.\n\n",
+it, enough to see every texel of maps wider than --width. When the map has a sun (a \
+compact bright source, as `envlight sun` reports it), its disc is outlined in cyan on \
+both panels (drawn at least 10 pixels across) and the top title gives its elevation, \
+azimuth and angular radius.\n\n",
     crate::conventions!()
 ))]
 pub struct Args {
@@ -68,6 +71,7 @@ const INK: [u8; 3] = [225, 225, 225];
 const DIM: [u8; 3] = [150, 150, 150];
 const DOT: [u8; 3] = [255, 0, 255];
 const ZERO_PDF: [u8; 3] = [0, 0, 0];
+const SUN_RING: [u8; 3] = [0, 230, 255];
 
 /// Runs `envlight importance`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
@@ -97,11 +101,30 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     let mut canvas = Canvas::new(layout.width, layout.height, BACKGROUND);
 
     // Panel 1: the map.
-    let map_title = format!(
+    let mut map_title = format!(
         "RADIANCE  {}  EXPOSURE ×{}  FILMIC",
         display_name(&loaded.name),
         short_number(exposure as f64)
     );
+    let sun = light.sun();
+    if let Some(sun) = &sun {
+        // The longest description of the sun that fits on the canvas.
+        let (el, az) = (sun.elevation_deg(), sun.azimuth_deg());
+        let room = layout.width - layout.left;
+        let suffix = [
+            format!(
+                "  SUN EL {el:.1}° AZ {az:.1}° R {:.2}°",
+                sun.angular_radius_deg()
+            ),
+            format!("  SUN {el:.1}°/{az:.1}°"),
+            String::new(),
+        ]
+        .into_iter()
+        .find(|s| font::text_extent(&format!("{map_title}{s}"), scale) <= room)
+        .unwrap_or_default();
+        map_title.push_str(&suffix);
+    }
+    let sun_ring = sun.map(|s| disc_outline(&s, pw, ph));
     canvas.text(
         layout.left,
         layout.top1 - layout.title_gap(),
@@ -145,6 +168,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         for &(x, y) in &dots {
             canvas.dot(layout.left + x, top + y, scale, DOT);
         }
+        for &(x, y) in sun_ring.iter().flatten() {
+            canvas.dot(layout.left + x, top + y, scale / 2, SUN_RING);
+        }
         canvas.axes(&layout, top);
     }
     canvas.colour_bar(&layout, lo, hi);
@@ -161,6 +187,35 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         .with_context(|| format!("{name}: cannot write PNG"))?;
     out.finish()?;
     Ok(Outcome::Success)
+}
+
+/// Pixels of the outline of the sun's disc on a `pw × ph` world lat-long panel: the
+/// circle at its angular radius around its direction (at least 5 pixels of radius,
+/// so a real sun shows), in the panel's equirectangular view.
+fn disc_outline(sun: &envlight::Sun, pw: usize, ph: usize) -> Vec<(usize, usize)> {
+    let c = sun.direction;
+    let radius = sun.angular_radius.max(5.0 * PI / ph as f64);
+    let helper = if c.z.abs() < 0.9 {
+        envlight::Vec3::new(0.0, 0.0, 1.0)
+    } else {
+        envlight::Vec3::new(1.0, 0.0, 0.0)
+    };
+    let Some(a) = helper.cross(c).normalized() else {
+        return Vec::new();
+    };
+    let b = c.cross(a);
+    let (s, co) = (radius.sin() as f32, radius.cos() as f32);
+    let steps = 4 * (pw + ph);
+    (0..steps)
+        .filter_map(|k| {
+            let t = 2.0 * std::f32::consts::PI * k as f32 / steps as f32;
+            let d = c * co + (a * t.cos() + b * t.sin()) * s;
+            let [u, v] = direction_to_equirect(d.normalized()?);
+            let x = ((u as f64 * pw as f64) as usize).min(pw - 1);
+            let y = ((v as f64 * ph as f64) as usize).min(ph - 1);
+            Some((x, y))
+        })
+        .collect()
 }
 
 /// The last path component of a map name, for the title.

@@ -10,6 +10,7 @@ pub mod info;
 pub mod render;
 pub mod sample;
 pub mod shader;
+pub mod sun;
 pub mod verify;
 
 /// How a subcommand that did not hit an error ended.

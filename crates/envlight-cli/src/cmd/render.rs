@@ -30,7 +30,8 @@ use crate::progress::Progress;
     "Scenes: balls (diffuse, rough copper, near-mirror silver and blue plastic spheres on a \
 checkered ground), diffuse (three white diffuse spheres of albedo 0.8 on a grey ground of \
 albedo 0.5), furnace (one diffuse sphere of albedo 0.5: under a constant map of \
-radiance 1 it renders 0.5 on the sphere and 1 around it).\n\n\
+radiance 1 it renders 0.5 on the sphere and 1 around it), room (a closed room lit only \
+through a window and a skylight, which are its portals).\n\n\
 Strategies estimate the light at each path vertex: uniform (uniform sphere directions), \
 bsdf (BSDF sampling only), light (environment importance sampling only), mis (both, \
 power heuristic), mis-compensated (mis with the map's mean luminance subtracted from the \
@@ -38,12 +39,17 @@ light's sampling density, after Karlik et al. 2019; unbiased because BSDF sampli
 covers what it leaves out), product (the light sampled in proportion to radiance times \
 the surface's cosine, or cosine times a GGX lobe for metals, at each shading point; each \
 sample weighted by the true BSDF), mis-product (product and BSDF sampling, power \
-heuristic). Paths use next-event estimation with shadow rays and \
+heuristic), portal (the light sampled only through the scene's portals, in proportion to \
+the radiance seen through them; the whole light in a scene without portals), mis-portal \
+(portal and BSDF sampling, balance heuristic). Paths use next-event estimation with shadow rays and \
 Russian roulette after 3 bounces. The image is the same for a given --seed whatever the \
 number of threads.\n\n\
---compare renders every strategy at --spp (and for --equal-time SECONDS each), measures \
-RMSE and relative MSE against --reference FILE (.exr/.pfm) or a mis render at \
---reference-spp, prints the table and writes a labelled PNG to -o.\n\n",
+--compare renders every strategy at --spp, then again at equal time: each for as long as \
+mis took at --spp in the same run (or for --equal-time SECONDS each), measures RMSE and \
+relative MSE against --reference FILE (.exr/.pfm) or a mis render at --reference-spp, \
+prints the table (RMSE/mis compares rows of the same budget) and writes a labelled PNG \
+to -o. Equal time is the fair comparison: a strategy that costs more per sample takes \
+fewer of them.\n\n",
     crate::conventions!()
 ))]
 pub struct RenderArgs {
@@ -105,7 +111,8 @@ pub struct RenderArgs {
     #[arg(long)]
     compare: bool,
 
-    /// With --compare, also render each strategy for SECONDS of wall time.
+    /// With --compare, render each strategy for SECONDS of wall time in the equal-time
+    /// row (default: as long as mis took at --spp).
     #[arg(long, value_name = "SECONDS", requires = "compare")]
     equal_time: Option<f64>,
 
@@ -198,7 +205,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         Some(path) => {
             let image = read_image(path)
                 .with_context(|| format!("{}: cannot read the reference", path.display()))?;
-            Some((image, path.display().to_string()))
+            // The file's name labels the reference (its folder is noise on a
+            // sheet, and a temporary path is meaningless there).
+            let name = path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            Some((image, name))
         }
         None => None,
     };
@@ -219,6 +232,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             render: settings,
             strategies: Strategy::ALL.to_vec(),
             equal_time: args.equal_time,
+            equal_time_of_mis: true,
             reference_spp: args.reference_spp,
         };
         let comparison = compare(&scene, &loaded.light, &compare_settings, reference, &bars)?;

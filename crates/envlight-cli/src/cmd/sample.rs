@@ -11,13 +11,36 @@ use rayon::prelude::*;
 use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::device::DeviceArgs;
-use crate::light_args::{warn, LightArgs};
+use crate::light_args::{warn, LightArgs, PortalArgs};
 use crate::output::{write_bytes, Output};
 use crate::progress::Progress;
-use crate::shading::{product_sampler, Density, NormalArgs};
+use crate::shading::{product_sampler, NormalArgs};
 
 /// Rows formatted by one task.
 const CHUNK_ROWS: u64 = 8192;
+
+/// What rows are drawn from: the light or the product sampler, or the portal
+/// light at `--at`.
+enum Density<'a> {
+    Shading(crate::shading::Density<'a>),
+    Portal(Box<envlight::portal::PortalPoint<'a>>),
+}
+
+impl Density<'_> {
+    fn sample(&self, xi: [f32; 2]) -> Option<envlight::LightSample> {
+        match self {
+            Density::Shading(d) => d.sample(xi),
+            Density::Portal(p) => p.sample(xi),
+        }
+    }
+
+    fn pdf(&self, direction: envlight::Vec3) -> f32 {
+        match self {
+            Density::Shading(d) => d.pdf(direction),
+            Density::Portal(p) => p.pdf(direction),
+        }
+    }
+}
 
 /// Arguments of `envlight sample`.
 #[derive(Debug, clap::Args)]
@@ -30,7 +53,9 @@ same 32-bit floats. Row k uses the k-th point of the seed's counter-based sequen
 the output depends only on MAP, the light options, N and the seed (not on the thread \
 count). An all-black map has pdf 0 and radiance 0 on every row. With --normal the \
 directions come from the product sampler for that surface normal and pdf is its density \
-(rows where nothing lit faces the surface have pdf 0).\n\n\
+(rows where nothing lit faces the surface have pdf 0). With --portal (repeatable) and --at \
+the directions go from the point --at through the portals only, and pdf is the portal light's \
+density there (rows with no sample, when nothing lit is seen through a portal, have pdf 0).\n\n\
 With --device gpu the rows come from the GPU (the same ξ, drawn on the device), in the \
 same format: they agree with the CPU's to about 1e-4 rad in direction and 1e-3 in pdf and \
 radiance (README, \"GPU\"); a row whose direction rounds into a cell of zero density has \
@@ -43,6 +68,9 @@ pub struct Args {
 
     #[command(flatten)]
     normal: NormalArgs,
+
+    #[command(flatten)]
+    portal: PortalArgs,
 
     #[command(flatten)]
     device: DeviceArgs,
@@ -62,10 +90,20 @@ pub struct Args {
 
 /// Runs `envlight sample`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
+    let (normal, gpu) = (args.normal.normal.is_some(), args.device.is_gpu());
+    args.portal.requested(normal, gpu)?;
     let loaded = args.light.load()?;
     let light = &loaded.light;
     let product = product_sampler(light, args.normal.normal);
-    let density = Density::new(light, product.as_ref(), args.normal.normal);
+    let portals = args.portal.build(light, normal, gpu)?;
+    let density = match &portals {
+        Some((pl, at)) => Density::Portal(Box::new(pl.at(*at))),
+        None => Density::Shading(crate::shading::Density::new(
+            light,
+            product.as_ref(),
+            args.normal.normal,
+        )),
+    };
     let gpu = args.device.open(light, args.normal.normal)?;
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
@@ -77,7 +115,14 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     };
     progress.finish();
     out.finish()?;
-    if failed > 0 && !loaded.black && args.normal.normal.is_some() {
+    if failed > 0 && !loaded.black && portals.is_some() {
+        warn(&format!(
+            "{}: {failed} of {} sample points gave no direction (nothing lit is seen \
+             through the portals from --at, or the point fell outside a portal that is \
+             not a parallelogram); written with pdf 0 and radiance 0",
+            loaded.name, args.count
+        ));
+    } else if failed > 0 && !loaded.black && args.normal.normal.is_some() {
         warn(&format!(
             "{}: {failed} of {} sample points gave no direction (a pole, or no light \
              above the surface); written with pdf 0 and radiance 0",

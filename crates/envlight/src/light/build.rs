@@ -313,7 +313,7 @@ fn compensate_rows(f: &[f32], cols: usize, rows: usize, factors: &[f64]) -> Opti
 /// lookup's edge behaviour (the seam average for periodic u; a copy of the edge
 /// texels for clamped u and for v). Returns `(values, u_nodes, v_nodes)`, values
 /// row-major over `(h + 2) × (w + 2)` nodes.
-fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
+pub(crate) fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
     let (w, h) = (image.width(), image.height());
     let centres = |n: usize| -> Vec<f64> {
         let mut nodes = Vec::with_capacity(n + 2);

@@ -25,6 +25,7 @@
 
 mod batch;
 mod build;
+pub(crate) use build::bilinear_nodes;
 pub use build::table_reduction;
 mod efficiency;
 

@@ -1,0 +1,503 @@
+//! Product sampling at a shading point (DESIGN.md §6a): directions drawn with
+//! density `p(ω | n) ≈ L(ω) f(ω) / ∫ L f`, exactly normalised and with an exact
+//! pdf, for a factor `f` that is the clamped cosine or the cosine times a glossy
+//! lobe ([`Factor`]), at a cost per shading point of a few light samples.
+//!
+//! **Levels.**
+//! - *fine* (module `fine`): the light's own density over its cells, the same kind as
+//!   the light draws (piecewise constant over texels, or piecewise bilinear
+//!   between texel centres), cut into `Pw × Ph` rectangular *patches* of cells
+//!   (128 × 64 by default); patch `k` holds the share `P_k` of the density.
+//! - *tables* (module `tables`): precomputed once per light, one distribution over the
+//!   patches for each node of an equal-area octahedral grid of directions
+//!   ([`ProductOptions::normal_grid`] cells a side). For the cosine, the nodes are
+//!   normals and patch `k`'s weight in node `a`'s table is
+//!   `P_k · max(cos⁺(a·c_k), s · B_k)`, `c_k` the patch's centre direction and `B_k`
+//!   an *upper bound* of `cos⁺(n·ω)` over the patch's directions and over every
+//!   normal `n` in the grid cells around `a` (exact over a lat-long light's (θ, φ)
+//!   boxes, over cones otherwise), `s` a fixed share (`tables::BOUND_SHARE`).
+//!   Glossy factors use tables over mirror directions for a few roughnesses, the
+//!   GGX proxy in place of the cosine; rough lobes use the cosine's tables.
+//!
+//! **Sampling.** [`ProductSampler::at`] maps the normal (or mirror direction) into
+//! the grid: in its cell, the four corner nodes get the bilinear weights of its
+//! place there. A sample picks one of the four tables by those weights (`ξ₀`),
+//! a patch from that table (`ξ₁`), then a point of the patch from the light's
+//! density restricted to it (a row, a cell, a point in the cell), mapped
+//! to a direction with the light's mapping and rotation. Its density is the
+//! mixture of the four tables:
+//!
+//! ```text
+//! p(ω | n) = (Σ_m b_m p_m(k)) · q(u, v | k) / J(ω)
+//! ```
+//!
+//! with `b_m` the bilinear weights, `p_m(k)` patch `k`'s probability in table `m`
+//! (read from the same fixed-point CDF that sampling inverts), `q(u, v | k)` the
+//! light's density in `(u, v)` restricted to the patch and renormalised, and
+//! `J = dω / du dv`. [`ShadingPoint::pdf`] computes exactly that, so it is the
+//! density of [`ShadingPoint::sample`]; it integrates to 1; and it is positive
+//! wherever `L · f > 0`, because every normal of a grid cell lies in each corner
+//! node's neighbourhood, whose tables bound the factor over it (up to the
+//! measure-zero poles of a lat-long map, where it is 0 as for the light).
+
+mod bounds;
+mod factor;
+mod fine;
+mod tables;
+#[cfg(test)]
+mod tests;
+
+pub use factor::Factor;
+
+use crate::distribution::ONE_MINUS_EPSILON;
+use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
+use crate::math::{is_positive_finite, Vec3};
+use factor::reflect;
+use fine::Fine;
+use rayon::prelude::*;
+use std::sync::{Arc, OnceLock};
+use tables::{Lobe, Mix, Tables};
+
+/// How a [`ProductSampler`] is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ProductOptions {
+    /// `[Pw, Ph]`: patches across and down the light's cell grid, clamped into it.
+    /// `None` for [`ProductOptions::default_patches`] of the light's mapping.
+    ///
+    /// More patches follow the factor more closely within the light's density and
+    /// cost memory in every table (4 bytes per patch per table).
+    pub patches: Option<[usize; 2]>,
+    /// Cells per side of the equal-area octahedral grid of normals of the cosine's
+    /// tables (`(n + 1)²` tables). `None` for
+    /// [`ProductOptions::DEFAULT_NORMAL_GRID`]. Finer grids bound the cosine over
+    /// smaller neighbourhoods: fewer samples where it is small, more memory.
+    pub normal_grid: Option<usize>,
+    /// Cells per side of the grid of mirror directions of each glossy roughness's
+    /// tables. `None` for [`ProductOptions::DEFAULT_LOBE_GRID`].
+    pub lobe_grid: Option<usize>,
+    /// How a patch's weight bounds the factor: always [`PatchBound::Cone`] except
+    /// in tests that prove the verification harness rejects the alternative.
+    #[doc(hidden)]
+    pub bound: PatchBound,
+}
+
+/// How [`ProductSampler`] weights a patch.
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PatchBound {
+    /// Floored by a share of the upper bound of the factor over the patch and the
+    /// node's neighbourhood: unbiased.
+    #[default]
+    Cone,
+    /// The factor at the patch's centre for the node's own direction only:
+    /// **biased** (a patch beyond the node's horizon gets weight 0 while a
+    /// neighbouring normal sees it lit). It exists so that tests can show that the
+    /// invariant checks catch it.
+    AxisOnly,
+}
+
+impl ProductOptions {
+    /// The default of [`ProductOptions::normal_grid`].
+    pub const DEFAULT_NORMAL_GRID: usize = 16;
+    /// The default of [`ProductOptions::lobe_grid`].
+    pub const DEFAULT_LOBE_GRID: usize = 8;
+
+    /// The patch grid used when [`ProductOptions::patches`] is `None`: 64 × 32 on
+    /// a lat-long map (patches about 5.6° square at the equator), 48 × 48 on the
+    /// equal-area square (2304 patches of equal solid angle). Chosen by measurement
+    /// (`envlight-verify`'s `product_efficiency` example, BENCHMARKS.md): on the
+    /// shared maps and the five test normals, 64 × 32 keeps the product's
+    /// efficiency for `Y·cos⁺` at least 0.86 (bilinear density) and 0.97 of the
+    /// light's own for `Y` (piecewise constant), within 0.02 of 128 × 64, with
+    /// tables a quarter the size.
+    pub fn default_patches(mapping: Mapping) -> [usize; 2] {
+        match mapping {
+            Mapping::Equirectangular => [64, 32],
+            Mapping::EqualArea => [48, 48],
+        }
+    }
+}
+
+/// The GGX roughnesses with tables of their own: a glossy factor uses the nearest
+/// (in log scale), or the cosine's tables from [`COSINE_FROM_ROUGHNESS`] up.
+const LOBE_ROUGHNESS: [f32; 3] = [0.08, 0.16, 0.32];
+
+/// Glossy factors this rough or rougher sample from the cosine's tables: their
+/// lobe is wide enough that the cosine is the better part of the product.
+const COSINE_FROM_ROUGHNESS: f32 = 0.45;
+
+/// Samples directions at a shading point in proportion to (a close bound of) the
+/// light's radiance times a [`Factor`], with the exact pdf (DESIGN.md §6a; the
+/// module docs give the scheme and the pdf's formula).
+///
+/// Guarantees: [`ShadingPoint::pdf`] is the density of [`ShadingPoint::sample`]
+/// (`pdf(sample(ξ).direction) == sample(ξ).pdf` to float precision); it integrates
+/// to 1; it is positive wherever the light's radiance and the factor are both
+/// positive (except at the poles of a lat-long map); within a patch it follows the
+/// light's own density, piecewise constant or piecewise bilinear
+/// ([`Self::density`]); a black map or an invalid factor samples nothing (`None`,
+/// pdf 0), nor does a factor no table mixed for it sees lit.
+///
+/// Cost: building is `O(w h)` for the fine level (rows in parallel) plus one
+/// weight per patch per table (tables in parallel). A shading point
+/// ([`Self::at`]) maps one direction into the grid, `O(1)`; a sample is a pick
+/// among four tables, a binary search over the patches, two over a patch's rows
+/// and cells, and the light's mapping and lookup; a pdf reads four table entries
+/// and two CDF widths. Nothing allocates after the build.
+///
+/// Memory: the fine level's fixed-point CDFs (a bit over 4 bytes per cell), and
+/// 4 bytes per patch per table: `(n + 1)²` tables for the cosine and as many per
+/// glossy roughness at the lobe grid's `n`; see [`Self::memory_bytes`].
+///
+/// ```
+/// use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
+/// use envlight::product::{Factor, ProductOptions, ProductSampler};
+/// use std::sync::Arc;
+///
+/// let light = EnvironmentLight::new(builtin::sky(64, 32), LightOptions::default()).unwrap();
+/// let sampler = ProductSampler::new(Arc::new(light), ProductOptions::default());
+/// let point = sampler.at(&Factor::cosine(Vec3::new(0.0, 0.0, 1.0)));
+/// let s = point.sample([0.3, 0.6]).expect("the sky lights an upward surface");
+/// assert!((point.pdf(s.direction) - s.pdf).abs() <= 1e-4 * s.pdf);
+/// // Well below the surface nothing is sampled, though the ground there is lit.
+/// let below = Vec3::new(1.0, 0.0, -1.0).normalized().unwrap();
+/// assert!(sampler.light().pdf(below) > 0.0 && point.pdf(below) == 0.0);
+/// ```
+#[derive(Debug, Clone)]
+pub struct ProductSampler {
+    light: Arc<EnvironmentLight>,
+    fine: Fine,
+    /// The cosine's tables.
+    cosine: Tables,
+    /// One set per [`LOBE_ROUGHNESS`], built when a glossy factor first needs it.
+    lobes: [OnceLock<Tables>; LOBE_ROUGHNESS.len()],
+    /// Cells per side of the lobes' grids.
+    lobe_grid: usize,
+    bound: PatchBound,
+}
+
+impl ProductSampler {
+    /// Builds the fine level and the tables for `light` (in parallel). A black map
+    /// gives a sampler that samples nothing.
+    pub fn new(light: Arc<EnvironmentLight>, options: ProductOptions) -> Self {
+        let patches = options
+            .patches
+            .unwrap_or_else(|| ProductOptions::default_patches(light.mapping()));
+        let fine = Fine::new(&light, patches);
+        let normal_grid = options
+            .normal_grid
+            .unwrap_or(ProductOptions::DEFAULT_NORMAL_GRID);
+        let lobe_grid = options
+            .lobe_grid
+            .unwrap_or(ProductOptions::DEFAULT_LOBE_GRID);
+        let cosine = Tables::new(&fine, normal_grid, Lobe::Cosine, options.bound);
+        Self {
+            light,
+            fine,
+            cosine,
+            lobes: Default::default(),
+            lobe_grid,
+            bound: options.bound,
+        }
+    }
+
+    /// Set `set` of tables: 0 for the cosine's, `1 + i` for roughness
+    /// `LOBE_ROUGHNESS[i]`'s (built on first use).
+    #[inline]
+    fn tables(&self, set: usize) -> &Tables {
+        match set.checked_sub(1) {
+            None => &self.cosine,
+            Some(i) => self.lobes[i].get_or_init(|| {
+                let alpha = LOBE_ROUGHNESS[i] as f64;
+                let lobe = Lobe::Glossy {
+                    alpha2: alpha * alpha,
+                };
+                Tables::new(&self.fine, self.lobe_grid, lobe, self.bound)
+            }),
+        }
+    }
+
+    /// The light sampled.
+    pub fn light(&self) -> &EnvironmentLight {
+        &self.light
+    }
+
+    /// The patch grid `[Pw, Ph]` in use (after clamping to the cell grid).
+    pub fn patches(&self) -> [usize; 2] {
+        self.fine.patches
+    }
+
+    /// The density drawn within a patch: the light's own kind.
+    pub fn density(&self) -> Density {
+        self.light.options().density
+    }
+
+    /// Tables held: the cosine's, and those of the glossy roughnesses built so
+    /// far (each is built when a glossy factor first needs it).
+    pub fn table_count(&self) -> usize {
+        self.built().map(Tables::len).sum()
+    }
+
+    /// The sets of tables built so far.
+    fn built(&self) -> impl Iterator<Item = &Tables> {
+        std::iter::once(&self.cosine).chain(self.lobes.iter().filter_map(OnceLock::get))
+    }
+
+    /// True when the light's density is zero everywhere: nothing is ever sampled.
+    pub fn is_black(&self) -> bool {
+        !self.fine.power.iter().any(|&p| p > 0.0)
+    }
+
+    /// Bytes of sampling data held (the fine level and the tables; not the light).
+    pub fn memory_bytes(&self) -> usize {
+        self.fine.memory_bytes() + self.built().map(Tables::memory_bytes).sum::<usize>()
+    }
+
+    /// The sampling state at a shading point with factor `factor`: which tables it
+    /// mixes and how. `O(1)`, no allocation; [`ShadingPoint::set_factor`] moves it.
+    pub fn at(&self, factor: &Factor) -> ShadingPoint<'_> {
+        let mut point = self.empty_point();
+        point.set_factor(factor);
+        point
+    }
+
+    /// A shading point with no (a zero) factor, which samples nothing.
+    fn empty_point(&self) -> ShadingPoint<'_> {
+        ShadingPoint {
+            sampler: self,
+            factor: None,
+            set: 0,
+            mix: Mix::default(),
+        }
+    }
+
+    /// [`ShadingPoint::sample`] at a shading point used once.
+    pub fn sample(&self, factor: &Factor, xi: [f32; 2]) -> Option<LightSample> {
+        self.at(factor).sample(xi)
+    }
+
+    /// [`ShadingPoint::pdf`] at a shading point used once (see [`Self::sample`]).
+    pub fn pdf(&self, factor: &Factor, direction: Vec3) -> f32 {
+        self.at(factor).pdf(direction)
+    }
+
+    /// One sample per shading point: `out[i] = self.sample(&factors[i], xi[i])`, in
+    /// parallel. Each result depends only on its own inputs, so the output is the
+    /// same for any thread count.
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub fn sample_batch(
+        &self,
+        factors: &[Factor],
+        xi: &[[f32; 2]],
+        out: &mut [Option<LightSample>],
+    ) {
+        self.per_point(factors, xi, out, |point, &xi| point.sample(xi));
+    }
+
+    /// `out[i] = self.pdf(&factors[i], directions[i])`, in parallel, as
+    /// [`Self::sample_batch`].
+    ///
+    /// # Panics
+    /// When the slices differ in length.
+    pub fn pdf_batch(&self, factors: &[Factor], directions: &[Vec3], out: &mut [f32]) {
+        self.per_point(factors, directions, out, |point, &d| point.pdf(d));
+    }
+
+    /// `out[i] = query(shading point of factors[i], &input[i])` in parallel, each
+    /// thread reusing one [`ShadingPoint`].
+    fn per_point<I: Sync, O: Send>(
+        &self,
+        factors: &[Factor],
+        input: &[I],
+        out: &mut [O],
+        query: impl Fn(&ShadingPoint, &I) -> O + Sync,
+    ) {
+        assert!(
+            factors.len() == input.len() && input.len() == out.len(),
+            "batch input and output lengths differ"
+        );
+        out.par_iter_mut()
+            .zip(factors.par_iter().zip(input.par_iter()))
+            .with_min_len(64)
+            .for_each_init(
+                || self.empty_point(),
+                |point, (o, (factor, x))| {
+                    point.set_factor(factor);
+                    *o = query(point, x);
+                },
+            );
+    }
+
+    /// The set of tables for a normalised factor and the light-frame direction
+    /// that indexes them: the normal for the cosine and rough lobes, the mirror
+    /// direction for the others.
+    fn tables_for(&self, factor: &Factor) -> (usize, Vec3) {
+        match *factor {
+            Factor::Cosine { normal } => (0, self.light.world_to_local(normal)),
+            Factor::Glossy {
+                normal, roughness, ..
+            } if roughness >= COSINE_FROM_ROUGHNESS => (0, self.light.world_to_local(normal)),
+            Factor::Glossy {
+                normal,
+                outgoing,
+                roughness,
+            } => {
+                // The nearest roughness in log scale: below the geometric mean of
+                // two neighbours, the lower.
+                let set = 1 + LOBE_ROUGHNESS
+                    .windows(2)
+                    .take_while(|pair| roughness * roughness >= pair[0] * pair[1])
+                    .count();
+                let mirror = reflect(outgoing, normal);
+                (set, self.light.world_to_local(mirror))
+            }
+        }
+    }
+
+    /// The planar density at image point `uv` for the tables `mix` of set `set`:
+    /// the patch's mixture probability times the light's density in it.
+    #[inline]
+    fn planar_density(&self, set: usize, mix: &Mix, uv: [f32; 2]) -> f32 {
+        match self.fine.locate(uv) {
+            Some((k, density)) => (self.tables(set).probability(mix, k) * density) as f32,
+            None => 0.0,
+        }
+    }
+}
+
+/// The sampling state at one shading point: the factor and the tables it mixes.
+/// Made by [`ProductSampler::at`]; `O(1)`.
+#[derive(Debug, Clone)]
+pub struct ShadingPoint<'a> {
+    sampler: &'a ProductSampler,
+    /// The normalised factor, `None` when the factor given was invalid.
+    factor: Option<Factor>,
+    /// Index of the set of tables in use.
+    set: usize,
+    /// Its tables mixed here.
+    mix: Mix,
+}
+
+impl ShadingPoint<'_> {
+    /// Moves this state to a shading point with factor `factor` (`O(1)`; nothing
+    /// when the normalised factor is unchanged).
+    pub fn set_factor(&mut self, factor: &Factor) {
+        let factor = factor.normalized();
+        // Bit for bit, so that skipping the work never changes a result (as
+        // `-0.0 == 0.0` could).
+        if Factor::bits(&factor) == Factor::bits(&self.factor) {
+            return;
+        }
+        self.factor = factor;
+        match &factor {
+            Some(f) => {
+                let sampler = self.sampler;
+                let (set, direction) = sampler.tables_for(f);
+                self.set = set;
+                self.mix = sampler.tables(set).mix(direction);
+                // A lobe's tables cover every lit patch; the cosine's say whether
+                // the surface sees any of them.
+                if set != 0 && !self.mix.is_empty() {
+                    let normal = sampler.light.world_to_local(f.normal());
+                    if sampler.cosine.mix(normal).is_empty() {
+                        self.mix = Mix::default();
+                    }
+                }
+            }
+            None => self.mix = Mix::default(),
+        }
+    }
+
+    /// The normalised factor of this shading point, `None` when the one given was
+    /// invalid.
+    pub fn factor(&self) -> Option<&Factor> {
+        self.factor.as_ref()
+    }
+
+    /// True when this point samples something: the factor is valid and some table
+    /// it mixes has weight. False means that no patch the factor can see (with
+    /// the tables' bounds) is lit: then the pdf is 0 everywhere and so is `L f`.
+    pub fn samples_anything(&self) -> bool {
+        !self.mix.is_empty()
+    }
+
+    /// Draws a world direction for `ξ ∈ [0, 1)²` with density [`Self::pdf`]: `ξ₀`
+    /// picks one of the four tables by its weight, `ξ₁` a patch from it; in the
+    /// patch, what is left of `ξ₁` picks the row and of `ξ₀` the cell, and the
+    /// point within it, from the light's density. The radiance is the light's
+    /// lookup at the sample's image point, `uv`.
+    ///
+    /// `None` when nothing can be sampled ([`Self::samples_anything`] is false), or
+    /// when the point falls exactly on a pole of a lat-long map (measure zero).
+    pub fn sample(&self, xi: [f32; 2]) -> Option<LightSample> {
+        if self.mix.is_empty() {
+            return None;
+        }
+        let sampler = self.sampler;
+        // `max` also maps a NaN ξ to 0.
+        #[allow(clippy::manual_clamp)]
+        let clamp = |x: f32| x.max(0.0).min(ONE_MINUS_EPSILON) as f64;
+        let x = clamp(xi[0]);
+        // The table: the first whose running sum passes x (never one of
+        // probability 0; the last with weight if rounding leaves x past them all).
+        let p = &self.mix.probability;
+        let (mut m, mut below, mut last) = (usize::MAX, 0.0, 0);
+        for (i, &pi) in p.iter().enumerate() {
+            if pi > 0.0 {
+                last = i;
+                if x < below + pi {
+                    m = i;
+                    break;
+                }
+                below += pi;
+            }
+        }
+        if m == usize::MAX {
+            m = last;
+            below -= p[last];
+        }
+        let x = ((x - below) / self.mix.probability[m]).clamp(0.0, ONE_MINUS_EPSILON as f64);
+        let (k, y) = sampler.tables(self.set).sample(self.mix.node[m], xi[1]);
+        let uv = sampler.fine.sample(k, [x, y as f64]);
+
+        let light = &sampler.light;
+        let (local, jacobian) = light.uv_to_local(uv);
+        let direction = light.local_to_world(local);
+        // A bilinear density changes across the f32 rounding of the direction
+        // (by up to ~1e-3 relative next to a bright texel): its pdf is evaluated
+        // where the caller will, at the returned direction, as the light does. A
+        // piecewise-constant density is exact at `uv`.
+        let pdf = if sampler.fine.is_continuous() {
+            self.pdf(direction)
+        } else {
+            sampler.planar_density(self.set, &self.mix, uv) / jacobian
+        };
+        if !(jacobian > 0.0 && is_positive_finite(pdf)) {
+            return None;
+        }
+        Some(LightSample {
+            direction,
+            pdf,
+            radiance: light.radiance_at_uv(uv),
+            uv,
+        })
+    }
+
+    /// The solid-angle density (per steradian) with which [`Self::sample`] produces
+    /// the world unit direction `direction`: the mixture probability of its patch
+    /// times the light's density restricted to the patch, over `J(ω)`. 0 where the
+    /// light's density or every mixed table's weight is 0, at the poles of a
+    /// lat-long map, and when nothing can be sampled.
+    #[inline]
+    pub fn pdf(&self, direction: Vec3) -> f32 {
+        if self.mix.is_empty() {
+            return 0.0;
+        }
+        let light = &self.sampler.light;
+        let (uv, inv_jacobian) = light.local_to_uv(light.world_to_local(direction));
+        let planar = self.sampler.planar_density(self.set, &self.mix, uv);
+        solid_angle_density(planar, inv_jacobian)
+    }
+}
