@@ -170,7 +170,9 @@ def test_product_sampling():
     assert np.allclose(light.pdf_product(up[ok], d[ok], outgoing=wo[ok], roughness=0.05), p[ok], rtol=1e-3)
     mirror = np.array([-0.6, 0.0, 0.8], np.float32)
     diffuse, _, _ = light.sample_product(up, uniform_u(n, 7))
-    assert np.median(d[ok] @ mirror) > 0.95 > np.median(diffuse @ mirror)
+    # A quarter of the glossy samples lie within 18° of the mirror direction (the
+    # rest mostly on the sun, 28° from it), against about 1% of the cosine's.
+    assert np.mean(d[ok] @ mirror > 0.95) > 10 * np.mean(diffuse @ mirror > 0.95)
     with pytest.raises(ValueError, match="together"):
         light.sample_product(up, uniform_u(n), roughness=0.1)
     with pytest.raises(ValueError, match="roughness"):

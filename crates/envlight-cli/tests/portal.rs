@@ -34,7 +34,8 @@ fn crosses(p: [f64; 3], d: [f64; 3], quad: [[f64; 3]; 4]) -> bool {
         .find(|&a| quad.iter().all(|c| c[a] == quad[0][a]))
         .unwrap();
     let t = (quad[0][axis] - p[axis]) / d[axis];
-    if !(t > 0.0) {
+    // NaN (a direction parallel to the plane) crosses nothing either.
+    if t.is_nan() || t <= 0.0 {
         return false;
     }
     (0..3).filter(|&a| a != axis).all(|a| {

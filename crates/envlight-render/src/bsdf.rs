@@ -160,6 +160,12 @@ impl Bsdf {
         })
     }
 
+    /// True for a Lambertian BSDF, whose product factor is its whole angular
+    /// shape (the cosine).
+    pub fn is_diffuse(&self) -> bool {
+        matches!(self, Bsdf::Diffuse { .. })
+    }
+
     /// The factor `f` of the product sampler's target `L(ω) f(ω)` at a surface point
     /// with (world) normal `normal`, facing the viewer, and outgoing direction
     /// `wo_world` (DESIGN.md §6a). Only a sampling target: a light sample drawn with

@@ -12,6 +12,11 @@ use envlight::rng::SplitMix64;
 use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
 use std::sync::Arc;
 
+/// Product samples per diffuse vertex under [`Strategy::MisProduct`] (see
+/// [`Integrator::li_with`]): two, as many shadow rays as MIS's light and BSDF
+/// samples take.
+const DIFFUSE_PRODUCT_SAMPLES: u32 = 2;
+
 /// Cells along each side of the portal light's rectified tables: small enough that
 /// a portal's table (`12 n²` bytes) stays in cache along the paths, which sampling
 /// at a vertex is bound by (the room's sky through its openings is smooth).
@@ -245,13 +250,29 @@ impl<'a> Integrator<'a> {
             let portal_point = self.portal.as_ref().map(|pl| pl.at(hit.point));
             let portal = portal_point.as_ref();
 
+            // At a diffuse vertex, `mis-product`'s light technique samples the
+            // whole integrand but visibility (the product of the light and the
+            // BSDF's cosine), which BSDF sampling cannot improve on: next-event
+            // estimation there takes `DIFFUSE_PRODUCT_SAMPLES` product samples (as
+            // many rays as the light and BSDF samples of MIS) and a BSDF-sampled
+            // ray that escapes counts 0; glossy vertices combine the two techniques.
+            let product_only = self.strategy == Strategy::MisProduct && bsdf.is_diffuse();
+            let (vertex_mis, light_samples) = if product_only {
+                (false, DIFFUSE_PRODUCT_SAMPLES)
+            } else {
+                (mis, 1)
+            };
+
             // Next-event estimation: a direction from the light technique, weighted
             // against the BSDF technique when combining. The estimate is the true
             // `f cos θi L / p`, whatever target the light technique sampled.
-            let xi_light = [rng.next_f32(), rng.next_f32()];
-            if let Some((wi_world, light_pdf, le)) =
-                self.sample_light_technique(xi_light, point, portal)
-            {
+            for _ in 0..light_samples {
+                let xi_light = [rng.next_f32(), rng.next_f32()];
+                let Some((wi_world, light_pdf, le)) =
+                    self.sample_light_technique(xi_light, point, portal)
+                else {
+                    continue;
+                };
                 let wi = frame.to_local(wi_world);
                 if wi.z > 0.0 && !is_black(le) {
                     let f = bsdf.eval(wo, wi);
@@ -260,12 +281,15 @@ impl<'a> Integrator<'a> {
                             .scene
                             .occluded(&Ray::spawn(hit.point, normal, wi_world))
                     {
-                        let weight = if mis {
+                        let weight = if vertex_mis {
                             heuristic(light_pdf, bsdf.pdf(wo, wi))
                         } else {
                             1.0
                         };
-                        let c = scale(mul(f, le), wi.z * weight / light_pdf);
+                        let c = scale(
+                            mul(f, le),
+                            wi.z * weight / (light_pdf * light_samples as f32),
+                        );
                         radiance = add(radiance, mul(throughput, c));
                     }
                 }
@@ -273,7 +297,8 @@ impl<'a> Integrator<'a> {
 
             // Continue the path by sampling the BSDF. At the last vertex this ray
             // only matters when it may escape to the light with a non-zero weight.
-            if depth == self.max_depth && !self.strategy.counts_escaped_bsdf_rays() {
+            let counts_escape = self.strategy.counts_escaped_bsdf_rays() && !product_only;
+            if depth == self.max_depth && !counts_escape {
                 break;
             }
             let uc = rng.next_f32();
@@ -296,8 +321,8 @@ impl<'a> Integrator<'a> {
             ray = Ray::spawn(hit.point, normal, wi_world);
             match self.scene.intersect(&ray, f32::INFINITY) {
                 None => {
-                    if self.strategy.counts_escaped_bsdf_rays() {
-                        let weight = if mis {
+                    if counts_escape {
+                        let weight = if vertex_mis {
                             heuristic(bs.pdf, self.light_technique_pdf(wi_world, point, portal))
                         } else {
                             1.0

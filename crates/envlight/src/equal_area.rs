@@ -91,11 +91,26 @@ pub fn sphere_to_square(d: Vec3) -> [f32; 2] {
     let Some(d) = d.normalized() else {
         return [0.5, 0.5];
     };
+    unit_sphere_to_square(d, f32::atan2)
+}
+
+/// [`sphere_to_square`] of a vector already of unit length, with
+/// [`crate::math::atan2_fast`] (within 2e-7 rad of libm's): for lookups that only
+/// need the square point to float precision, such as the product sampler's grid
+/// of normals.
+#[inline]
+pub(crate) fn unit_sphere_to_square_fast(d: Vec3) -> [f32; 2] {
+    unit_sphere_to_square(d, crate::math::atan2_fast)
+}
+
+/// [`sphere_to_square`] of the unit `d`, with `atan2(y, x)` as given.
+#[inline(always)]
+fn unit_sphere_to_square(d: Vec3, atan2: impl Fn(f32, f32) -> f32) -> [f32; 2] {
     let (x, y, z) = (d.x.abs(), d.y.abs(), d.z.abs());
     // 1 - |z| = (x² + y²)/(1 + |z|) for a unit vector, without cancellation.
     let r = ((x * x + y * y) / (1.0 + z)).sqrt().min(1.0);
     let phi_fraction = if x > 0.0 || y > 0.0 {
-        (y.atan2(x) * (1.0 / FRAC_PI_2)).clamp(0.0, 1.0)
+        (atan2(y, x) * (1.0 / FRAC_PI_2)).clamp(0.0, 1.0)
     } else {
         0.0
     };

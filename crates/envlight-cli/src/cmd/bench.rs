@@ -194,17 +194,10 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             black_box(&out_samples);
         }));
     let bytes_per_texel = light.sampling_bytes() as f64 / light_texels as f64;
-    let product = match args.normal.normal {
-        Some(normal) => Some(measure_product(
-            light,
-            normal,
-            &xi,
-            &dirs,
-            args.repeat,
-            &one_thread,
-        )),
-        None => None,
-    };
+    let product = args
+        .normal
+        .normal
+        .map(|normal| measure_product(light, normal, &xi, &dirs, args.repeat, &one_thread));
 
     let mut out = Output::create(None)?;
     let text = if args.json {

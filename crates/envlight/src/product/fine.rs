@@ -285,12 +285,6 @@ impl Fine {
         ]
     }
 
-    /// True when the density is continuous within a cell (bilinear), false when
-    /// it is constant over each.
-    pub fn is_continuous(&self) -> bool {
-        matches!(self.cells, Cells::Bilinear { .. })
-    }
-
     /// Patch `k`'s cell columns `x0..x1` and rows `y0..y1`.
     #[inline]
     fn patch_cells(&self, k: usize) -> ([usize; 2], [usize; 2]) {
@@ -335,21 +329,24 @@ impl Fine {
 
     /// A point of patch `k` (which has power) for `ξ ∈ [0, 1)²`: the row with
     /// `ξ₁`, the cell with `ξ₀`, and the point in the cell with what is left of
-    /// each. Returns the image point (inside the cell the density reads back).
-    pub fn sample(&self, k: usize, xi: [f64; 2]) -> [f32; 2] {
+    /// each. Returns the image point (inside the cell that [`Self::locate`] finds
+    /// for it) and, for texels, `q(u, v | k)` there as [`Self::locate`] computes it
+    /// (for the bilinear density, which varies across a point's rounding, `None`).
+    pub fn sample(&self, k: usize, xi: [f64; 2]) -> ([f32; 2], Option<f64>) {
         let ([x0, _], [y0, _]) = self.patch_cells(k);
         let c = k % self.patches[0];
-        let (row, frac_v) = sample_cdf(self.marginal(k), xi[1]);
+        let (row, frac_v, wv) = sample_cdf(self.marginal(k), xi[1]);
         let j = y0 + row;
-        let (column, frac_u) = sample_cdf(self.segment(j, c), xi[0]);
+        let (column, frac_u, wu) = sample_cdf(self.segment(j, c), xi[0]);
         let i = x0 + column;
         match &self.cells {
             Cells::Texels => {
                 let [w, h] = self.size;
-                [
+                let uv = [
                     place_in_cell_f64(i, frac_u, w),
                     place_in_cell_f64(j, frac_v, h),
-                ]
+                ];
+                (uv, Some(wv as f64 * wu as f64 * self.texel_scale))
             }
             Cells::Bilinear {
                 values,
@@ -359,10 +356,11 @@ impl Fine {
                 let [a, b, c, d] = corners(values, self.size[0] + 2, i, j);
                 let y = sample_linear(frac_v, a + b, c + d);
                 let x = sample_linear(frac_u, a + (c - a) * y, b + (d - b) * y);
-                [
+                let uv = [
                     self.place(0, i, u_nodes[i] + x * (u_nodes[i + 1] - u_nodes[i])),
                     self.place(1, j, v_nodes[j] + y * (v_nodes[j + 1] - v_nodes[j])),
-                ]
+                ];
+                (uv, None)
             }
         }
     }
@@ -465,10 +463,10 @@ fn corners(values: &[f32], mu: usize, i: usize, j: usize) -> [f64; 4] {
 }
 
 /// Continuous sample of a fixed-point CDF (`n + 1` entries from 0 to [`CDF_ONE`]):
-/// the cell `o` with `c[o] ≤ ξ·CDF_ONE < c[o + 1]` (never a cell of zero width) and
-/// the offset of `ξ` within it in `[0, 1)`.
+/// the cell `o` with `c[o] ≤ ξ·CDF_ONE < c[o + 1]` (never a cell of zero width),
+/// the offset of `ξ` within it in `[0, 1)`, and its width.
 #[inline]
-pub(super) fn sample_cdf(cdf: &[u32], xi: f64) -> (usize, f64) {
+fn sample_cdf(cdf: &[u32], xi: f64) -> (usize, f64, u32) {
     let n = cdf.len() - 1;
     // `max` also maps NaN to 0.
     let t = (xi * CDF_ONE as f64).max(0.0).min((CDF_ONE - 1) as f64);
@@ -476,7 +474,7 @@ pub(super) fn sample_cdf(cdf: &[u32], xi: f64) -> (usize, f64) {
     let o = cdf[1..n].partition_point(|&c| c <= x);
     let (lo, hi) = (cdf[o], cdf[o + 1]);
     let frac = (t - lo as f64) / (hi - lo) as f64;
-    (o, frac.clamp(0.0, 1.0 - f64::EPSILON / 2.0))
+    (o, frac.clamp(0.0, 1.0 - f64::EPSILON / 2.0), hi - lo)
 }
 
 /// Builds the CDFs of one band of patch rows (cell rows `rows`), each row's

@@ -72,8 +72,9 @@ pub struct ProductOptions {
     /// [`ProductOptions::DEFAULT_NORMAL_GRID`]. Finer grids bound the cosine over
     /// smaller neighbourhoods: fewer samples where it is small, more memory.
     pub normal_grid: Option<usize>,
-    /// Cells per side of the grid of mirror directions of each glossy roughness's
-    /// tables. `None` for [`ProductOptions::DEFAULT_LOBE_GRID`].
+    /// Cells per side of the grid of mirror directions of the widest glossy
+    /// roughness's tables (the narrower ones use 1.5 and 2 times as many). `None`
+    /// for [`ProductOptions::DEFAULT_LOBE_GRID`].
     pub lobe_grid: Option<usize>,
     /// How a patch's weight bounds the factor: always [`PatchBound::Cone`] except
     /// in tests that prove the verification harness rejects the alternative.
@@ -121,6 +122,12 @@ impl ProductOptions {
 /// The GGX roughnesses with tables of their own: a glossy factor uses the nearest
 /// (in log scale), or the cosine's tables from [`COSINE_FROM_ROUGHNESS`] up.
 const LOBE_ROUGHNESS: [f32; 3] = [0.08, 0.16, 0.32];
+
+/// The lobe grid of each of [`LOBE_ROUGHNESS`], in halves of
+/// [`ProductOptions::lobe_grid`]: narrower lobes need finer grids, as a shading
+/// point mixes tables about its four neighbouring nodes (16, 12 and 8 cells a side
+/// by default; nodes about 13°, 17° and 25° apart).
+const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 2];
 
 /// Glossy factors this rough or rougher sample from the cosine's tables: their
 /// lobe is wide enough that the cosine is the better part of the product.
@@ -212,7 +219,8 @@ impl ProductSampler {
                 let lobe = Lobe::Glossy {
                     alpha2: alpha * alpha,
                 };
-                Tables::new(&self.fine, self.lobe_grid, lobe, self.bound)
+                let grid = self.lobe_grid * LOBE_GRID_SCALE[i] / 2;
+                Tables::new(&self.fine, grid.max(1), lobe, self.bound)
             }),
         }
     }
@@ -460,19 +468,22 @@ impl ShadingPoint<'_> {
         }
         let x = ((x - below) / self.mix.probability[m]).clamp(0.0, ONE_MINUS_EPSILON as f64);
         let (k, y) = sampler.tables(self.set).sample(self.mix.node[m], xi[1]);
-        let uv = sampler.fine.sample(k, [x, y as f64]);
+        let (uv, density) = sampler.fine.sample(k, [x, y as f64]);
 
         let light = &sampler.light;
         let (local, jacobian) = light.uv_to_local(uv);
         let direction = light.local_to_world(local);
-        // A bilinear density changes across the f32 rounding of the direction
-        // (by up to ~1e-3 relative next to a bright texel): its pdf is evaluated
-        // where the caller will, at the returned direction, as the light does. A
-        // piecewise-constant density is exact at `uv`.
-        let pdf = if sampler.fine.is_continuous() {
-            self.pdf(direction)
-        } else {
-            sampler.planar_density(self.set, &self.mix, uv) / jacobian
+        // A piecewise-constant density is exact at `uv`, whose cell (and so patch)
+        // is the one sampled. A bilinear density changes across the f32 rounding
+        // of the direction (by up to ~1e-3 relative next to a bright texel): its
+        // pdf is evaluated where the caller will, at the returned direction, as
+        // the light does.
+        let pdf = match density {
+            Some(q) => {
+                let tables = sampler.tables(self.set);
+                (tables.probability(&self.mix, k) * q) as f32 / jacobian
+            }
+            None => self.pdf(direction),
         };
         if !(jacobian > 0.0 && is_positive_finite(pdf)) {
             return None;

@@ -15,7 +15,7 @@ use super::factor::lobe_proxy;
 use super::fine::Fine;
 use super::PatchBound;
 use crate::distribution::{Distribution1D, CDF_ONE};
-use crate::equal_area::{sphere_to_square, square_to_sphere};
+use crate::equal_area::{square_to_sphere, unit_sphere_to_square_fast};
 use crate::math::Vec3;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_PI_2;
@@ -51,6 +51,13 @@ pub(super) struct Tables {
     n: usize,
     /// Node `b (n + 1) + a`'s table, `None` when it has no weight at all.
     table: Vec<Option<Distribution1D>>,
+    /// Whether node `m`'s table is empty (a compact copy of `table[m].is_none()`,
+    /// which every shading point reads four of).
+    empty: Vec<bool>,
+    /// The tables' CDF widths transposed, patch-major: patch `k` of node `m` at
+    /// `k (n + 1)² + m` (0 for an empty table). A pdf reads four neighbouring nodes
+    /// of one patch, one or two cache lines here instead of four tables.
+    widths: Vec<u32>,
 }
 
 /// The tables a shading point mixes: four nodes and their probabilities (which sum
@@ -84,17 +91,37 @@ impl Tables {
                     any.then(|| Distribution1D::new(weights))
                 },
             )
-            .collect();
-        Self { n, table }
+            .collect::<Vec<Option<Distribution1D>>>();
+        let nodes = table.len();
+        let mut widths = vec![0u32; patches * nodes];
+        widths
+            .par_chunks_mut(nodes)
+            .enumerate()
+            .for_each(|(k, row)| {
+                for (w, t) in row.iter_mut().zip(&table) {
+                    if let Some(d) = t {
+                        *w = d.cdf()[k + 1] - d.cdf()[k];
+                    }
+                }
+            });
+        let empty = table.iter().map(Option::is_none).collect();
+        Self {
+            n,
+            table,
+            empty,
+            widths,
+        }
     }
 
-    /// The four tables to mix for the unit light-frame direction `d`, with the
+    /// The four tables to mix for the unit light-frame direction `d` (its grid cell
+    /// found to float precision: a rounding that moves it into a neighbouring cell
+    /// leaves it within every corner's neighbourhood, whose cone has a slack), with the
     /// bilinear weights of `d`'s place in its grid cell (those of empty tables
     /// given to the others).
     #[inline]
     pub fn mix(&self, d: Vec3) -> Mix {
         let n = self.n;
-        let [s, t] = sphere_to_square(d);
+        let [s, t] = unit_sphere_to_square_fast(d);
         let (x, y) = (s as f64 * n as f64, t as f64 * n as f64);
         let (i, j) = ((x as usize).min(n - 1), (y as usize).min(n - 1));
         let (fx, fy) = (
@@ -110,7 +137,7 @@ impl Tables {
             fx * fy,
         ];
         for (p, &k) in probability.iter_mut().zip(&node) {
-            if self.table[k].is_none() {
+            if self.empty[k] {
                 *p = 0.0;
             }
         }
@@ -144,12 +171,10 @@ impl Tables {
     /// The probability of patch `k` in `mix`: `Σ_m P_m · p_m(k)`.
     #[inline]
     pub fn probability(&self, mix: &Mix, k: usize) -> f64 {
+        let widths = &self.widths[k * self.table.len()..(k + 1) * self.table.len()];
         let mut sum = 0.0;
         for (&node, &p) in mix.node.iter().zip(&mix.probability) {
-            if let (true, Some(d)) = (p > 0.0, &self.table[node as usize]) {
-                let cdf = d.cdf();
-                sum += p * (cdf[k + 1] - cdf[k]) as f64;
-            }
+            sum += p * widths[node as usize] as f64;
         }
         sum * (1.0 / CDF_ONE as f64)
     }
