@@ -166,6 +166,11 @@ impl Bsdf {
         matches!(self, Bsdf::Diffuse { .. })
     }
 
+    /// True for a GGX metal.
+    pub fn is_conductor(&self) -> bool {
+        matches!(self, Bsdf::Conductor { .. })
+    }
+
     /// The factor `f` of the product sampler's target `L(ω) f(ω)` at a surface point
     /// with (world) normal `normal`, facing the viewer, and outgoing direction
     /// `wo_world` (DESIGN.md §6a). Only a sampling target: a light sample drawn with

@@ -138,7 +138,8 @@ impl<'a> Integrator<'a> {
 
     /// Density of the light-sampling technique at world direction `d` (0 for
     /// strategies without one); `point` is the current vertex's shading point for
-    /// the product strategies.
+    /// the product strategies (`None` where `mis-product` uses the light's own
+    /// sampler instead).
     #[inline]
     fn light_technique_pdf(
         &self,
@@ -154,7 +155,10 @@ impl<'a> Integrator<'a> {
                 None => self.light.pdf(d),
             },
             (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
-            (None, Strategy::Product | Strategy::MisProduct) => point.map_or(0.0, |p| p.pdf(d)),
+            (None, Strategy::Product | Strategy::MisProduct) => match point {
+                Some(p) => p.pdf(d),
+                None => self.light.pdf(d),
+            },
             (None, _) => 0.0,
         }
     }
@@ -183,9 +187,11 @@ impl<'a> Integrator<'a> {
                 .as_ref()
                 .and_then(|c| c.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
-            Strategy::Product | Strategy::MisProduct => point
-                .and_then(|p| p.sample(xi))
-                .map(|s| (s.direction, s.pdf, s.radiance)),
+            Strategy::Product | Strategy::MisProduct => match point {
+                Some(p) => p.sample(xi),
+                None => self.light.sample(xi),
+            }
+            .map(|s| (s.direction, s.pdf, s.radiance)),
             Strategy::Portal | Strategy::MisPortal => match portal {
                 Some(p) => p.sample(xi),
                 None => self.light.sample(xi),
@@ -241,10 +247,15 @@ impl<'a> Integrator<'a> {
             }
             // The product sampler's target at this vertex; the escaped BSDF ray below
             // is weighted with the pdf of this same shading point.
-            if let Some(point) = scratch.point.as_mut() {
+            // `mis-product` leaves metals to the light's own sampler: their tables
+            // follow the lobe but not the cosine under it, and BSDF sampling
+            // already covers a narrow lobe (BENCHMARKS.md, "Rendering at equal
+            // time": with product samples there, `balls` lost at equal time).
+            let light_here = self.strategy == Strategy::MisProduct && bsdf.is_conductor();
+            if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
                 point.set_factor(&bsdf.product_factor(normal, -ray.direction));
             }
-            let point = scratch.point.as_ref();
+            let point = scratch.point.as_ref().filter(|_| !light_here);
             // The portals as seen from this vertex (their windows and powers; on the
             // stack, no allocation).
             let portal_point = self.portal.as_ref().map(|pl| pl.at(hit.point));

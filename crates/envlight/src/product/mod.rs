@@ -108,7 +108,7 @@ impl ProductOptions {
     /// equal-area square (2304 patches of equal solid angle). Chosen by measurement
     /// (`envlight-verify`'s `product_efficiency` example, BENCHMARKS.md): on the
     /// shared maps and the five test normals, 64 × 32 keeps the product's
-    /// efficiency for `Y·cos⁺` at least 0.86 (bilinear density) and 0.97 of the
+    /// efficiency for `Y·cos⁺` at least 0.867 (bilinear density) and 0.947 of the
     /// light's own for `Y` (piecewise constant), within 0.02 of 128 × 64, with
     /// tables a quarter the size.
     pub fn default_patches(mapping: Mapping) -> [usize; 2] {
