@@ -11,8 +11,10 @@ use envlight::{
 #[derive(Debug, Clone, clap::Args)]
 pub struct NormalArgs {
     /// Sample (and report pdfs) for a surface with this normal, in proportion to
-    /// radiance × max(0, n·ω) (DESIGN.md §6a), instead of radiance alone. Three
-    /// comma-separated numbers in world space; any non-zero length (normalised).
+    /// radiance × max(0, n·ω) (DESIGN.md §6a), instead of radiance alone: precomputed
+    /// tables over patches of the map, and within a patch the light's own density
+    /// (--density: piecewise-constant or piecewise-bilinear). Three comma-separated
+    /// numbers in world space; any non-zero length (normalised).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_normal, allow_hyphen_values = true)]
     pub normal: Option<Vec3>,
 }
