@@ -13,9 +13,13 @@ use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, Shading
 use std::sync::Arc;
 
 /// Product samples per diffuse vertex under [`Strategy::MisProduct`] (see
-/// [`Integrator::li_with`]): two, as many shadow rays as MIS's light and BSDF
-/// samples take.
-const DIFFUSE_PRODUCT_SAMPLES: u32 = 2;
+/// [`Integrator::li_with`]). Measured (BENCHMARKS.md, "Rendering at equal time"):
+/// two (as many shadow rays as MIS's light and BSDF samples) win more on the
+/// `diffuse` scene with direct light only (0.66× `mis`'s RMSE at equal time against
+/// 0.75–0.77×) but lose on `balls` (1.02–1.44× against 0.85–1.06×), where light
+/// through the metals, which sampling at a diffuse vertex does not touch, carries
+/// the error and the second sample only costs time.
+const DIFFUSE_PRODUCT_SAMPLES: u32 = 1;
 
 /// Cells along each side of the portal light's rectified tables: small enough that
 /// a portal's table (`12 n²` bytes) stays in cache along the paths, which sampling
@@ -264,9 +268,9 @@ impl<'a> Integrator<'a> {
             // At a diffuse vertex, `mis-product`'s light technique samples the
             // whole integrand but visibility (the product of the light and the
             // BSDF's cosine), which BSDF sampling cannot improve on: next-event
-            // estimation there takes `DIFFUSE_PRODUCT_SAMPLES` product samples (as
-            // many rays as the light and BSDF samples of MIS) and a BSDF-sampled
-            // ray that escapes counts 0; glossy vertices combine the two techniques.
+            // estimation there takes `DIFFUSE_PRODUCT_SAMPLES` product samples and
+            // a BSDF-sampled ray that escapes counts 0 (so at the last vertex none
+            // is traced); other vertices combine the two techniques.
             let product_only = self.strategy == Strategy::MisProduct && bsdf.is_diffuse();
             let (vertex_mis, light_samples) = if product_only {
                 (false, DIFFUSE_PRODUCT_SAMPLES)
