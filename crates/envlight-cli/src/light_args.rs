@@ -565,8 +565,8 @@ impl PortalArgs {
     }
 }
 
-/// Three finite comma-separated numbers.
-fn parse_xyz(text: &str) -> Result<envlight::Vec3, String> {
+/// Three finite comma-separated numbers (`--at`, `--portal` corners, `--normal`).
+pub(crate) fn parse_xyz(text: &str) -> Result<envlight::Vec3, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let [x, y, z] = parts[..] else {
         return Err(format!(

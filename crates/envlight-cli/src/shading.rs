@@ -21,21 +21,7 @@ pub struct NormalArgs {
 
 /// A unit normal from `X,Y,Z`: three finite numbers, not all zero.
 pub fn parse_normal(text: &str) -> Result<Vec3, String> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let [x, y, z] = parts[..] else {
-        return Err(format!(
-            "expected three comma-separated numbers X,Y,Z, got {} part(s)",
-            parts.len()
-        ));
-    };
-    let number = |s: &str| -> Result<f32, String> {
-        match s.parse::<f32>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            Ok(_) => Err(format!("'{s}' is not finite")),
-            Err(_) => Err(format!("'{s}' is not a number")),
-        }
-    };
-    let v = Vec3::new(number(x)?, number(y)?, number(z)?);
+    let v = crate::light_args::parse_xyz(text)?;
     v.normalized()
         .filter(|n| n.x.is_finite() && n.y.is_finite() && n.z.is_finite())
         .ok_or_else(|| "the normal has zero length".to_string())
