@@ -4,6 +4,8 @@
 
 #![allow(clippy::needless_range_loop)] // per-channel arithmetic reads best indexed
 
+mod common;
+
 use envlight::rng::{mix64, SplitMix64};
 use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Vec3};
 use envlight_render::{
@@ -134,16 +136,7 @@ fn strategies_agree_on_the_room() {
             seed: 8,
         };
         let r = render_with_error(&scene, &light, &settings, &NoProgress);
-        let n = r.image.pixels().len() as f64;
-        let mut mean = [0.0f64; 3];
-        let mut var = [0.0f64; 3];
-        for (p, e) in r.image.pixels().iter().zip(r.std_error.pixels()) {
-            for c in 0..3 {
-                mean[c] += p[c] as f64 / n;
-                var[c] += (e[c] as f64 / n).powi(2);
-            }
-        }
-        let se = var.map(f64::sqrt);
+        let (mean, se) = common::image_mean_and_error(&r);
         eprintln!("{strategy:<12} {mean:.5?} ± {se:.6?}");
         means.push((strategy, mean, se));
     }

@@ -3,6 +3,8 @@
 
 #![allow(clippy::needless_range_loop)] // per-channel arithmetic reads best indexed
 
+mod common;
+
 use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Rotation};
 use envlight_render::{
     compare, render, render_for_time, render_with_error, Budget, CompareSettings, NoProgress,
@@ -119,16 +121,7 @@ fn strategies_agree_on_balls() {
             seed: 5,
         };
         let r = render_with_error(&scene, &light, &settings, &NoProgress);
-        let n = r.image.pixels().len() as f64;
-        let mut mean = [0.0f64; 3];
-        let mut var = [0.0f64; 3];
-        for (p, e) in r.image.pixels().iter().zip(r.std_error.pixels()) {
-            for c in 0..3 {
-                mean[c] += p[c] as f64 / n;
-                var[c] += (e[c] as f64 / n).powi(2);
-            }
-        }
-        let se = var.map(f64::sqrt);
+        let (mean, se) = common::image_mean_and_error(&r);
         eprintln!("{strategy:<16} {mean:.5?} ± {se:.6?}");
         means.push((strategy, mean, se));
     }

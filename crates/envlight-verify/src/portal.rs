@@ -658,13 +658,6 @@ pub fn assert_portal_invariants(case: &str, s: &AtPortalPoint, cfg: &PortalConfi
             r.value
         ));
     }
-    println!("{}", lines.join("\n"));
-    let failures = report.failures();
-    assert!(
-        failures.is_empty(),
-        "[{case}] {} failed:\n  {}",
-        s.name(),
-        failures.join("\n  ")
-    );
+    crate::suite::print_and_assert(case, &s.name(), &lines, &report.failures());
     report
 }

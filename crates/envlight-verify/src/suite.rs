@@ -250,15 +250,19 @@ pub fn assert_invariants(
         let mark = if verdict.is_ok() { "ok  " } else { "FAIL" };
         lines.push(format!("  {mark} [{seconds:.2}s] {line}"));
     }
+    print_and_assert(case, &s.name(), &lines, &report.failures());
+    report
+}
+
+/// Prints `lines` (a case's header and one line per check) and panics listing
+/// `failures` when there are any: the tail of every `assert_*` one-liner.
+pub(crate) fn print_and_assert(case: &str, name: &str, lines: &[String], failures: &[String]) {
     println!("{}", lines.join("\n"));
-    let failures = report.failures();
     assert!(
         failures.is_empty(),
-        "[{case}] {} failed:\n  {}",
-        s.name(),
+        "[{case}] {name} failed:\n  {}",
         failures.join("\n  ")
     );
-    report
 }
 
 /// Checks an all-black sampler: no sample, pdf 0 everywhere, ∫p = 0, no NaN;
