@@ -94,15 +94,6 @@ pub fn sphere_to_square(d: Vec3) -> [f32; 2] {
     unit_sphere_to_square(d, f32::atan2)
 }
 
-/// [`sphere_to_square`] of a vector already of unit length, with
-/// [`crate::math::atan2_fast`] (within 2e-7 rad of libm's): for lookups that only
-/// need the square point to float precision, such as the product sampler's grid
-/// of normals.
-#[inline]
-pub(crate) fn unit_sphere_to_square_fast(d: Vec3) -> [f32; 2] {
-    unit_sphere_to_square(d, crate::math::atan2_fast)
-}
-
 /// [`sphere_to_square`] of the unit `d`, with `atan2(y, x)` as given.
 #[inline(always)]
 fn unit_sphere_to_square(d: Vec3, atan2: impl Fn(f32, f32) -> f32) -> [f32; 2] {

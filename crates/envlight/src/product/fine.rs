@@ -11,15 +11,17 @@
 //!   bilinear interpolation of `Y · J` at their corners (as in
 //!   [`crate::bilinear`]), weighted by its integral `M = Δu Δv Σ corners / 4`.
 //!
-//! A patch is a block of cells; within patch `k` a cell is drawn by two fixed-point
-//! CDFs (a row from the patch's marginal, a cell from the row's segment) and a
-//! point in the cell uniformly or, for the bilinear density, by inverting the
-//! bilinear function's linear marginal and conditional. The density in `(u, v)`
-//! given the patch is `q(u, v | k) = g(u, v) / F_k`, `g` the light's (unnormalised)
-//! density and `F_k` its integral over the patch: up to the CDFs' 2⁻³² rounding,
-//! which [`Fine::locate`] reports exactly as sampling uses it.
+//! A patch is a block of cells, stored patch by patch. Within patch `k` a cell is
+//! drawn from the patch's own fixed-point distribution over its cells by an exact
+//! alias table (module `pick`: one slot read, no search), and a point in the cell
+//! uniformly or, for the bilinear density, by inverting the bilinear function's
+//! linear marginal and conditional. The density in `(u, v)` given the patch is
+//! `q(u, v | k) = g(u, v) / F_k`, `g` the light's (unnormalised) density and `F_k`
+//! its integral over the patch: up to the CDF's 2⁻³² rounding, which
+//! [`Fine::locate`] reports exactly as sampling uses it (the cell's width).
 
 use super::bounds::Region;
+use super::pick::{self, Slot};
 use crate::bilinear::sample_linear;
 use crate::distribution::{cell_index, place_in_cell_f64, Distribution1D, CDF_ONE};
 use crate::light::{bilinear_nodes, Density, EnvironmentLight};
@@ -39,14 +41,26 @@ enum Cells {
     },
 }
 
+/// Where patch `k` lies in the cell grid and in [`Fine`]'s per-cell arrays.
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    /// First cell column and row.
+    x0: u32,
+    y0: u32,
+    /// Cells across and down.
+    cols: u32,
+    rows: u32,
+    /// Index of the patch's first cell in [`Fine::widths`] and [`Fine::slots`]:
+    /// the patch's cells follow, row by row.
+    first: u32,
+}
+
 /// The fine level: cells, patches, their CDFs and regions (see the module docs).
 #[derive(Debug, Clone)]
 pub(super) struct Fine {
     cells: Cells,
     /// The image's `[w, h]`.
     size: [usize; 2],
-    /// Cells across and down: `[w, h]` or `[w + 1, h + 1]`.
-    grid: [usize; 2],
     /// `[Pw, Ph]`.
     pub patches: [usize; 2],
     /// First cell column of each patch column, `Pw + 1` entries.
@@ -57,12 +71,14 @@ pub(super) struct Fine {
     pub(super) col_patch: Vec<u32>,
     /// The patch row of each cell row.
     pub(super) row_patch: Vec<u32>,
-    /// Fixed-point CDFs of the row segments: cell row `j`, patch column `c`
-    /// (cells `x0..x1`) at `j (cw + Pw) + x0 + c`, `x1 - x0 + 1` entries.
-    pub(super) segment_cdf: Vec<u32>,
-    /// Fixed-point CDFs over each patch's rows: patch `(c, r)` (rows `y0..y1`) at
-    /// `Pw (y0 + r) + c (y1 - y0 + 1)`, `y1 - y0 + 1` entries.
-    pub(super) marginal_cdf: Vec<u32>,
+    /// Each cell's width in its patch's fixed-point distribution over its cells
+    /// (`q(cell | k) = width / CDF_ONE`; 0 for an unlit cell), patch by patch.
+    pub(super) widths: Vec<u32>,
+    /// The alias table of each patch's widths ([`pick`]), laid out as `widths`,
+    /// aliases local to the patch.
+    pub(super) slots: Vec<Slot>,
+    /// Patch `k`'s cells and where they are stored.
+    spans: Vec<Span>,
     /// Patch `k = r Pw + c`: its share `P_k = F_k / Σ F` of the density.
     pub power: Vec<f64>,
     /// The regions of each patch's lit cells (`None` for a patch without power).
@@ -70,8 +86,8 @@ pub(super) struct Fine {
     /// Each patch's centre of light: the unit mean of its cells' centre
     /// directions (light frame) weighted by their probability within the patch.
     pub centres: Vec<[f64; 3]>,
-    /// For texels, `w h / CDF_ONE²`: a texel's density in `(u, v)` given its patch
-    /// is its two CDF widths times this.
+    /// For texels, `w h / CDF_ONE`: a texel's density in `(u, v)` given its patch
+    /// is its width times this.
     texel_scale: f64,
 }
 
@@ -110,21 +126,36 @@ impl Fine {
         };
         let (col_patch, row_patch) = (owners(&col_start, cw), owners(&row_start, ch));
 
-        // One band of patch rows per task: each band's CDFs are contiguous runs of
-        // both arrays.
-        let mut segment_cdf = vec![0u32; ch * (cw + pw)];
-        let mut marginal_cdf = vec![0u32; pw * (ch + ph)];
+        // Cells are stored patch by patch, the patches of a patch row one after
+        // the other: patch (c, r) starts at y0 cw + x0 (y1 - y0), and patch row r
+        // fills cells y0 cw .. y1 cw, one band of both arrays per task.
+        let spans: Vec<Span> = (0..pw * ph)
+            .map(|k| {
+                let (c, r) = (k % pw, k / pw);
+                let (x0, x1) = (col_start[c], col_start[c + 1]);
+                let (y0, y1) = (row_start[r], row_start[r + 1]);
+                let first = u32::try_from(y0 as u64 * cw as u64 + x0 as u64 * (y1 - y0) as u64)
+                    .expect("cell grids of up to 2³² cells");
+                Span {
+                    x0,
+                    y0,
+                    cols: x1 - x0,
+                    rows: y1 - y0,
+                    first,
+                }
+            })
+            .collect();
+        let mut widths = vec![0u32; cw * ch];
+        let mut slots = vec![Slot::default(); cw * ch];
         let mut bands = Vec::with_capacity(ph);
-        let (mut segments, mut marginals) = (&mut segment_cdf[..], &mut marginal_cdf[..]);
+        let (mut band_widths, mut band_slots) = (&mut widths[..], &mut slots[..]);
         for r in 0..ph {
-            let (y0, y1) = (row_start[r] as usize, row_start[r + 1] as usize);
-            let (band_segments, rest) =
-                std::mem::take(&mut segments).split_at_mut((y1 - y0) * (cw + pw));
-            segments = rest;
-            let (band_marginals, rest) =
-                std::mem::take(&mut marginals).split_at_mut(pw * (y1 - y0 + 1));
-            marginals = rest;
-            bands.push((y0..y1, band_segments, band_marginals));
+            let rows = (row_start[r + 1] - row_start[r]) as usize;
+            let (this, rest) = std::mem::take(&mut band_widths).split_at_mut(rows * cw);
+            band_widths = rest;
+            let (these, others) = std::mem::take(&mut band_slots).split_at_mut(rows * cw);
+            band_slots = others;
+            bands.push((r, this, these));
         }
         let fill_rows = |first: usize, out: &mut [f32]| match &cells {
             Cells::Texels => light.importance_rows(first, out),
@@ -150,8 +181,9 @@ impl Fine {
         };
         let band_sums: Vec<Vec<f64>> = bands
             .into_par_iter()
-            .map(|(rows, segments, marginals)| {
-                build_band(cw, &col_start, rows, segments, marginals, &fill_rows)
+            .map(|(r, widths, slots)| {
+                let band = &spans[r * pw..(r + 1) * pw];
+                build_band(cw, band, widths, slots, &fill_rows)
             })
             .collect();
         let sums: Vec<f64> = band_sums.concat();
@@ -162,20 +194,20 @@ impl Fine {
             0.0
         };
         let mut fine = Self {
+            spans,
             cells,
             size: [w, h],
-            grid,
             patches: [pw, ph],
             col_start,
             row_start,
             col_patch,
             row_patch,
-            segment_cdf,
-            marginal_cdf,
+            widths,
+            slots,
             power: sums.iter().map(|&s| s * inv_total).collect(),
             regions: Vec::new(),
             centres: Vec::new(),
-            texel_scale: (w as f64 / CDF_ONE as f64) * (h as f64 / CDF_ONE as f64),
+            texel_scale: (w as f64 * h as f64) / CDF_ONE as f64,
         };
         let (regions, centres) = (0..pw * ph)
             .into_par_iter()
@@ -200,59 +232,39 @@ impl Fine {
     }
 
     /// The smallest cell rectangle `[x0, x1, y0, y1]` (ends exclusive) holding
-    /// patch `k`'s lit cells, those of non-zero CDF width: `None` if there is none.
+    /// patch `k`'s lit cells, those of non-zero width: `None` if there is none.
     fn lit_cells(&self, k: usize) -> Option<[usize; 4]> {
-        let ([x0, x1], [y0, y1]) = self.patch_cells(k);
-        let c = k % self.patches[0];
-        let width = |cdf: &[u32], o: usize| cdf[o + 1] - cdf[o];
-        let marginal = self.marginal(k);
         let mut rect: Option<[usize; 4]> = None;
-        for j in y0..y1 {
-            if width(marginal, j - y0) == 0 {
-                continue;
-            }
-            let segment = self.segment(j, c);
-            let first = (0..x1 - x0).find(|&o| width(segment, o) > 0);
-            let last = (0..x1 - x0).rev().find(|&o| width(segment, o) > 0);
-            if let (Some(f), Some(l)) = (first, last) {
-                let b = [x0 + f, x0 + l + 1, j, j + 1];
-                rect = Some(match rect {
-                    Some(a) => [
-                        a[0].min(b[0]),
-                        a[1].max(b[1]),
-                        a[2].min(b[2]),
-                        a[3].max(b[3]),
-                    ],
-                    None => b,
-                });
-            }
+        for (i, j, _) in self.lit(k) {
+            rect = Some(match rect {
+                Some([x0, x1, y0, y1]) => [x0.min(i), x1.max(i + 1), y0.min(j), y1.max(j + 1)],
+                None => [i, i + 1, j, j + 1],
+            });
         }
         rect
     }
 
+    /// Patch `k`'s cells of non-zero width: `(column, row, width)`.
+    fn lit(&self, k: usize) -> impl Iterator<Item = (usize, usize, u32)> + '_ {
+        let s = self.spans[k];
+        let (first, cols) = (s.first as usize, s.cols as usize);
+        let n = cols * s.rows as usize;
+        self.widths[first..first + n]
+            .iter()
+            .enumerate()
+            .filter(|(_, &w)| w > 0)
+            .map(move |(o, &w)| (s.x0 as usize + o % cols, s.y0 as usize + o / cols, w))
+    }
+
     /// Patch `k`'s centre of light (see [`Fine::centres`]); +z if it has none.
     fn centre_of_light(&self, light: &EnvironmentLight, k: usize) -> [f64; 3] {
-        let ([x0, x1], [y0, y1]) = self.patch_cells(k);
-        let c = k % self.patches[0];
-        let width = |cdf: &[u32], o: usize| (cdf[o + 1] - cdf[o]) as f64;
-        let marginal = self.marginal(k);
         let mut sum = [0.0f64; 3];
-        for j in y0..y1 {
-            let wv = width(marginal, j - y0);
-            if wv == 0.0 {
-                continue;
-            }
+        for (i, j, width) in self.lit(k) {
+            let u = 0.5 * (self.edge(0, i) + self.edge(0, i + 1));
             let v = 0.5 * (self.edge(1, j) + self.edge(1, j + 1));
-            let segment = self.segment(j, c);
-            for i in x0..x1 {
-                let wu = width(segment, i - x0);
-                if wu > 0.0 {
-                    let u = 0.5 * (self.edge(0, i) + self.edge(0, i + 1));
-                    let (d, _) = light.uv_to_local([u as f32, v as f32]);
-                    for (s, x) in sum.iter_mut().zip([d.x, d.y, d.z]) {
-                        *s += wv * wu * x as f64;
-                    }
-                }
+            let (d, _) = light.uv_to_local([u as f32, v as f32]);
+            for (s, x) in sum.iter_mut().zip([d.x, d.y, d.z]) {
+                *s += width as f64 * x as f64;
             }
         }
         let length = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
@@ -286,32 +298,22 @@ impl Fine {
     }
 
     /// Patch `k`'s cell columns `x0..x1` and rows `y0..y1`.
+    #[cfg(test)]
+    pub(super) fn patch_cells(&self, k: usize) -> ([usize; 2], [usize; 2]) {
+        let s = &self.spans[k];
+        let (x0, y0) = (s.x0 as usize, s.y0 as usize);
+        ([x0, x0 + s.cols as usize], [y0, y0 + s.rows as usize])
+    }
+
+    /// Patch `k`'s cell widths and alias slots, its cells row by row.
     #[inline]
-    fn patch_cells(&self, k: usize) -> ([usize; 2], [usize; 2]) {
-        let pw = self.patches[0];
-        let (c, r) = (k % pw, k / pw);
+    pub(super) fn patch(&self, k: usize) -> (&[u32], &[Slot]) {
+        let s = &self.spans[k];
+        let (first, n) = (s.first as usize, (s.cols * s.rows) as usize);
         (
-            [self.col_start[c] as usize, self.col_start[c + 1] as usize],
-            [self.row_start[r] as usize, self.row_start[r + 1] as usize],
+            &self.widths[first..first + n],
+            &self.slots[first..first + n],
         )
-    }
-
-    /// Patch `k`'s CDF over its rows.
-    #[inline]
-    pub(super) fn marginal(&self, k: usize) -> &[u32] {
-        let pw = self.patches[0];
-        let (c, r) = (k % pw, k / pw);
-        let (y0, y1) = (self.row_start[r] as usize, self.row_start[r + 1] as usize);
-        let at = pw * (y0 + r) + c * (y1 - y0 + 1);
-        &self.marginal_cdf[at..at + y1 - y0 + 1]
-    }
-
-    /// Cell row `j`'s CDF over the cells of patch column `c`.
-    #[inline]
-    pub(super) fn segment(&self, j: usize, c: usize) -> &[u32] {
-        let (x0, x1) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
-        let at = j * (self.grid[0] + self.patches[0]) + x0 + c;
-        &self.segment_cdf[at..at + x1 - x0 + 1]
     }
 
     /// The cell holding image coordinate `x ∈ [0, 1]` along `axis`.
@@ -327,18 +329,20 @@ impl Fine {
         }
     }
 
-    /// A point of patch `k` (which has power) for `ξ ∈ [0, 1)²`: the row with
-    /// `ξ₁`, the cell with `ξ₀`, and the point in the cell with what is left of
-    /// each. Returns the image point (inside the cell that [`Self::locate`] finds
-    /// for it) and, for texels, `q(u, v | k)` there as [`Self::locate`] computes it
-    /// (for the bilinear density, which varies across a point's rounding, `None`).
+    /// A point of patch `k` (which has power) for `ξ ∈ [0, 1)²`: the cell with
+    /// `ξ₀` from the patch's alias table, the point in the cell with what is left
+    /// of `ξ₀` across and `ξ₁` down. Returns the image point (inside the cell that
+    /// [`Self::locate`] finds for it) and, for texels, `q(u, v | k)` there as
+    /// [`Self::locate`] computes it (for the bilinear density, which varies across
+    /// a point's rounding, `None`).
+    #[inline]
     pub fn sample(&self, k: usize, xi: [f64; 2]) -> ([f32; 2], Option<f64>) {
-        let ([x0, _], [y0, _]) = self.patch_cells(k);
-        let c = k % self.patches[0];
-        let (row, frac_v, wv) = sample_cdf(self.marginal(k), xi[1]);
-        let j = y0 + row;
-        let (column, frac_u, wu) = sample_cdf(self.segment(j, c), xi[0]);
-        let i = x0 + column;
+        let s = &self.spans[k];
+        let (widths, slots) = self.patch(k);
+        let (cell, frac_u) = pick::pick(slots, xi[0]);
+        let (row, column) = (cell as u32 / s.cols, cell as u32 % s.cols);
+        let (i, j) = ((s.x0 + column) as usize, (s.y0 + row) as usize);
+        let frac_v = xi[1];
         match &self.cells {
             Cells::Texels => {
                 let [w, h] = self.size;
@@ -346,7 +350,7 @@ impl Fine {
                     place_in_cell_f64(i, frac_u, w),
                     place_in_cell_f64(j, frac_v, h),
                 ];
-                (uv, Some(wv as f64 * wu as f64 * self.texel_scale))
+                (uv, Some(widths[cell] as f64 * self.texel_scale))
             }
             Cells::Bilinear {
                 values,
@@ -384,23 +388,20 @@ impl Fine {
     }
 
     /// The patch of image point `uv` and the density in `(u, v)` there given that
-    /// patch, `q(u, v | k)`; `None` where the patch has no power.
+    /// patch, `q(u, v | k)`; `None` where the cell has no weight (nor the patch).
     #[inline]
     pub fn locate(&self, uv: [f32; 2]) -> Option<(usize, f64)> {
         let (i, j) = (self.cell_of(0, uv[0]), self.cell_of(1, uv[1]));
         let (c, r) = (self.col_patch[i] as usize, self.row_patch[j] as usize);
         let k = r * self.patches[0] + c;
-        if self.power[k] <= 0.0 {
+        let s = &self.spans[k];
+        let local = (j - s.y0 as usize) * s.cols as usize + (i - s.x0 as usize);
+        let width = self.widths[s.first as usize + local];
+        if width == 0 {
             return None;
         }
-        let ([x0, _], [y0, _]) = self.patch_cells(k);
-        let width = |cdf: &[u32], o: usize| (cdf[o + 1] - cdf[o]) as f64;
-        let (wv, wu) = (
-            width(self.marginal(k), j - y0),
-            width(self.segment(j, c), i - x0),
-        );
         let density = match &self.cells {
-            Cells::Texels => wv * wu * self.texel_scale,
+            Cells::Texels => width as f64 * self.texel_scale,
             Cells::Bilinear {
                 values,
                 u_nodes,
@@ -414,9 +415,8 @@ impl Fine {
                 let y = ((uv[1] as f64 - v_nodes[j]) / dv).clamp(0.0, 1.0);
                 let value = (1.0 - y) * (a + (b - a) * x) + y * (cc + (d - cc) * x);
                 let mean = 0.25 * (a + b + cc + d);
-                let scale = 1.0 / (CDF_ONE as f64 * CDF_ONE as f64);
                 if mean > 0.0 {
-                    wv * wu * scale * value / (mean * du * dv)
+                    width as f64 / CDF_ONE as f64 * value / (mean * du * dv)
                 } else {
                     0.0
                 }
@@ -425,7 +425,7 @@ impl Fine {
         Some((k, density))
     }
 
-    /// Bytes held: the CDFs, index tables, powers and regions (and the bilinear
+    /// Bytes held: the widths and alias slots, index tables, powers and regions (and the bilinear
     /// density's node values).
     pub fn memory_bytes(&self) -> usize {
         let nodes = match &self.cells {
@@ -436,12 +436,13 @@ impl Fine {
                 v_nodes,
             } => 4 * values.len() + 8 * (u_nodes.len() + v_nodes.len()),
         };
-        4 * (self.segment_cdf.len()
-            + self.marginal_cdf.len()
+        4 * (self.widths.len()
             + self.col_start.len()
             + self.row_start.len()
             + self.col_patch.len()
             + self.row_patch.len())
+            + std::mem::size_of::<Slot>() * self.slots.len()
+            + std::mem::size_of::<Span>() * self.spans.len()
             + 8 * self.power.len()
             + std::mem::size_of::<Option<Region>>() * self.regions.len()
             + 24 * self.centres.len()
@@ -462,70 +463,46 @@ fn corners(values: &[f32], mu: usize, i: usize, j: usize) -> [f64; 4] {
     ]
 }
 
-/// Continuous sample of a fixed-point CDF (`n + 1` entries from 0 to [`CDF_ONE`]):
-/// the cell `o` with `c[o] ≤ ξ·CDF_ONE < c[o + 1]` (never a cell of zero width),
-/// the offset of `ξ` within it in `[0, 1)`, and its width.
-#[inline]
-fn sample_cdf(cdf: &[u32], xi: f64) -> (usize, f64, u32) {
-    let n = cdf.len() - 1;
-    // `max` also maps NaN to 0.
-    let t = (xi * CDF_ONE as f64).max(0.0).min((CDF_ONE - 1) as f64);
-    let x = t as u32;
-    let o = cdf[1..n].partition_point(|&c| c <= x);
-    let (lo, hi) = (cdf[o], cdf[o + 1]);
-    let frac = (t - lo as f64) / (hi - lo) as f64;
-    (o, frac.clamp(0.0, 1.0 - f64::EPSILON / 2.0), hi - lo)
-}
-
-/// Builds the CDFs of one band of patch rows (cell rows `rows`), each row's
-/// importance from `fill_rows(first_row, out)` (`cw` values a row): each row's
-/// segment CDFs into `segments` and each patch's CDF over its rows into
-/// `marginals` (laid out as in [`Fine`]). Returns each patch's importance sum
-/// `F_k`, patch columns in order.
+/// Builds one band of patches (one patch row, the cells of `band`'s patches, the
+/// band's rows' importance from `fill_rows(first_row, out)`, `cw` values a row):
+/// each patch's fixed-point distribution over its cells into `widths` and its
+/// alias table into `slots` (laid out as in [`Fine`], from the band's first
+/// cell). Returns each patch's importance sum `F_k`, in order.
 fn build_band(
     cw: usize,
-    col_start: &[u32],
-    rows: std::ops::Range<usize>,
-    segments: &mut [u32],
-    marginals: &mut [u32],
+    band: &[Span],
+    widths: &mut [u32],
+    slots: &mut [Slot],
     fill_rows: &(impl Fn(usize, &mut [f32]) + Sync),
 ) -> Vec<f64> {
-    let pw = col_start.len() - 1;
-    let n = rows.len();
-    let mut importance = vec![0.0f32; n * cw];
-    fill_rows(rows.start, &mut importance);
-    // row_sums[c n + jj]: the sum of row jj's segment in patch column c.
-    let mut row_sums = vec![0.0f64; pw * n];
-    for (jj, (row, out)) in importance
-        .chunks_exact(cw)
-        .zip(segments.chunks_exact_mut(cw + pw))
-        .enumerate()
-    {
-        for c in 0..pw {
-            let (x0, x1) = (col_start[c] as usize, col_start[c + 1] as usize);
-            let segment = Distribution1D::new(&row[x0..x1]);
-            out[x0 + c..=x1 + c].copy_from_slice(segment.cdf());
-            row_sums[c * n + jj] = segment.integral() * (x1 - x0) as f64;
-        }
-    }
-    let mut weights = vec![0.0f32; n];
-    (0..pw)
-        .map(|c| {
-            let sums = &row_sums[c * n..(c + 1) * n];
-            // Relative to the largest, so that f32 neither overflows nor (but for
-            // the odd subnormal, kept positive) underflows: a row with importance
-            // must keep a CDF width of at least one unit.
-            let max = sums.iter().fold(0.0f64, |a, &b| a.max(b));
-            for (weight, &sum) in weights.iter_mut().zip(sums) {
-                *weight = if sum > 0.0 {
-                    ((sum / max) as f32).max(f32::from_bits(1))
-                } else {
-                    0.0
-                };
+    let (y0, rows) = (band[0].y0 as usize, band[0].rows as usize);
+    let start = band[0].first as usize;
+    let mut importance = vec![0.0f32; rows * cw];
+    fill_rows(y0, &mut importance);
+    let mut cells = Vec::new();
+    band.iter()
+        .map(|s| {
+            let (x0, cols) = (s.x0 as usize, s.cols as usize);
+            cells.clear();
+            for row in importance.chunks_exact(cw) {
+                cells.extend_from_slice(&row[x0..x0 + cols]);
             }
-            let marginal = Distribution1D::new(&weights);
-            marginals[c * (n + 1)..(c + 1) * (n + 1)].copy_from_slice(marginal.cdf());
-            sums.iter().sum()
+            let at = s.first as usize - start;
+            let (widths, slots) = (
+                &mut widths[at..at + cells.len()],
+                &mut slots[at..at + cells.len()],
+            );
+            let d = Distribution1D::new(&cells);
+            if d.integral() <= 0.0 || d.integral().is_nan() {
+                // No light: widths 0, nothing to pick.
+                pick::build(widths, slots);
+                return 0.0;
+            }
+            for (w, c) in widths.iter_mut().zip(d.cdf().windows(2)) {
+                *w = c[1] - c[0];
+            }
+            pick::build(widths, slots);
+            d.integral() * cells.len() as f64
         })
         .collect()
 }

@@ -43,13 +43,13 @@
 mod bounds;
 mod factor;
 mod fine;
+mod pick;
 mod tables;
 #[cfg(test)]
 mod tests;
 
 pub use factor::Factor;
 
-use crate::distribution::ONE_MINUS_EPSILON;
 use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
 use crate::math::{is_positive_finite, Vec3};
 use factor::reflect;
@@ -132,6 +132,12 @@ const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 2];
 /// Glossy factors this rough or rougher sample from the cosine's tables: their
 /// lobe is wide enough that the cosine is the better part of the product.
 const COSINE_FROM_ROUGHNESS: f32 = 0.45;
+
+/// Half the spacing of f32 values just below 1.
+const XI_HALF_QUANTUM: f64 = f32::EPSILON as f64 / 4.0;
+
+/// The largest f64 below 1.
+const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// Samples directions at a shading point in proportion to (a close bound of) the
 /// light's radiance times a [`Factor`], with the exact pdf (DESIGN.md §6a; the
@@ -444,9 +450,12 @@ impl ShadingPoint<'_> {
             return None;
         }
         let sampler = self.sampler;
-        // `max` also maps a NaN ξ to 0.
+        // ξ moved to the middle of its f32 quantum (2⁻²⁴ below 1), so that what is
+        // left of it after a pick among a power of two of slots is never exactly
+        // 0: that would put points on cell edges, where the f32 round trip of the
+        // direction may find the neighbouring cell. `max` also maps a NaN ξ to 0.
         #[allow(clippy::manual_clamp)]
-        let clamp = |x: f32| x.max(0.0).min(ONE_MINUS_EPSILON) as f64;
+        let clamp = |x: f32| (x.max(0.0) as f64 + XI_HALF_QUANTUM).min(BELOW_ONE);
         let x = clamp(xi[0]);
         // The table: the first whose running sum passes x (never one of
         // probability 0; the last with weight if rounding leaves x past them all).
@@ -466,9 +475,11 @@ impl ShadingPoint<'_> {
             m = last;
             below -= p[last];
         }
-        let x = ((x - below) / self.mix.probability[m]).clamp(0.0, ONE_MINUS_EPSILON as f64);
-        let (k, y) = sampler.tables(self.set).sample(self.mix.node[m], xi[1]);
-        let (uv, density) = sampler.fine.sample(k, [x, y as f64]);
+        let x = ((x - below) / self.mix.probability[m]).clamp(0.0, BELOW_ONE);
+        let (k, y) = sampler
+            .tables(self.set)
+            .sample(self.mix.node[m], clamp(xi[1]));
+        let (uv, density) = sampler.fine.sample(k, [x, y]);
 
         let light = &sampler.light;
         let (local, jacobian) = light.uv_to_local(uv);

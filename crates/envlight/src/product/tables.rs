@@ -1,21 +1,28 @@
 //! Patch tables for a fixed grid of directions, precomputed once per light: for
-//! each node of an equal-area octahedral grid over the sphere of normals (or of
-//! mirror directions), a fixed-point CDF over the fine level's patches whose
-//! weights are the patch's power times the factor's value over it, floored by a
-//! share of an upper bound of the factor over the patch *and* over every direction
-//! of the node's neighbourhood.
+//! each node of an octahedral grid over the sphere of normals (or of mirror
+//! directions), a fixed-point CDF over the fine level's patches whose weights are
+//! the patch's power times the factor's value over it, floored by a share of an
+//! upper bound of the factor over the patch *and* over every direction of the
+//! node's neighbourhood.
 //!
 //! A shading point whose direction `d` falls in grid cell `(i, j)` mixes the four
 //! corner nodes' tables with bilinear weights in the grid; every direction of that
 //! cell is in each corner's neighbourhood, so each table it mixes gives weight to
 //! every patch the factor sees, and the mixture is positive wherever `L f > 0`.
+//!
+//! **The grid** is the plain octahedral map of the sphere onto `[0, 1]²` (not the
+//! light's equal-area one): a direction is found in it with one L1 norm, one
+//! division and a fold, no square root or arc tangent, which is most of what a new
+//! shading point costs. Its cells are not equal in solid angle (about 7° a side at
+//! the six axis directions, 17° at the octants' centres for 16 cells a side); the
+//! neighbourhood cones follow each node's own cells.
 
-use super::bounds::{dot, norm, Direction, BOUNDARY_STEPS, CONE_SLACK, EQUAL_AREA_LIPSCHITZ};
+use super::bounds::{dot, norm, Direction, BOUNDARY_STEPS, CONE_SLACK};
 use super::factor::lobe_proxy;
 use super::fine::Fine;
+use super::pick::{self, Slot};
 use super::PatchBound;
 use crate::distribution::{Distribution1D, CDF_ONE};
-use crate::equal_area::{square_to_sphere, unit_sphere_to_square_fast};
 use crate::math::Vec3;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_PI_2;
@@ -40,21 +47,22 @@ pub(super) enum Lobe {
 /// give the same worst case over random normals, 0.01 the better one at the nodes.
 pub(super) const BOUND_SHARE: f64 = 0.01;
 
-/// One table per node of an `n × n`-cell equal-area octahedral grid of directions
+/// One table per node of an `n × n`-cell octahedral grid of directions
 /// (`(n + 1)²` nodes, on the cells' corners), over a fine level's patches: a
-/// fixed-point CDF with a guide table ([`Distribution1D`]), so that a patch is
-/// found in O(1) expected steps rather than by a binary search whose dependent
-/// loads miss the cache.
+/// fixed-point distribution, picked from by an exact alias table (module `pick`),
+/// so that a patch is found with one slot read rather than a search whose
+/// dependent loads miss the cache.
 #[derive(Debug, Clone)]
 pub(super) struct Tables {
     /// Cells per side of the grid.
     n: usize,
-    /// Node `b (n + 1) + a`'s table, `None` when it has no weight at all.
-    table: Vec<Option<Distribution1D>>,
-    /// Whether node `m`'s table is empty (a compact copy of `table[m].is_none()`,
-    /// which every shading point reads four of).
+    /// Patches per table.
+    patches: usize,
+    /// Node `m = b (n + 1) + a`'s alias slots at `m P .. (m + 1) P`.
+    slots: Vec<Slot>,
+    /// Whether node `m`'s table is empty (no patch has weight for it).
     empty: Vec<bool>,
-    /// The tables' CDF widths transposed, patch-major: patch `k` of node `m` at
+    /// The tables' widths transposed, patch-major: patch `k` of node `m` at
     /// `k (n + 1)² + m` (0 for an empty table). A pdf reads four neighbouring nodes
     /// of one patch, one or two cache lines here instead of four tables.
     widths: Vec<u32>,
@@ -80,55 +88,67 @@ impl Tables {
     pub fn new(fine: &Fine, n: usize, lobe: Lobe, bound: PatchBound) -> Self {
         let n = n.max(1);
         let patches = fine.power.len();
-        let table = (0..(n + 1) * (n + 1))
-            .into_par_iter()
+        let nodes = (n + 1) * (n + 1);
+        let mut slots = vec![Slot::default(); nodes * patches];
+        let mut by_node = vec![0u32; nodes * patches];
+        let empty = slots
+            .par_chunks_mut(patches)
+            .zip(by_node.par_chunks_mut(patches))
+            .enumerate()
             .map_init(
                 || vec![0.0f32; patches],
-                |weights, node| {
+                |weights, (node, (slots, widths))| {
                     let (axis, spread) = neighbourhood(n, node % (n + 1), node / (n + 1));
                     fill_weights(fine, &axis, spread, lobe, bound, weights);
                     let any = weights.iter().any(|&w| w > 0.0);
-                    any.then(|| Distribution1D::new(weights))
+                    if any {
+                        let d = Distribution1D::new(weights);
+                        for (w, c) in widths.iter_mut().zip(d.cdf().windows(2)) {
+                            *w = c[1] - c[0];
+                        }
+                    }
+                    pick::build(widths, slots);
+                    !any
                 },
             )
-            .collect::<Vec<Option<Distribution1D>>>();
-        let nodes = table.len();
+            .collect::<Vec<bool>>();
         let mut widths = vec![0u32; patches * nodes];
         widths
             .par_chunks_mut(nodes)
             .enumerate()
             .for_each(|(k, row)| {
-                for (w, t) in row.iter_mut().zip(&table) {
-                    if let Some(d) = t {
-                        *w = d.cdf()[k + 1] - d.cdf()[k];
-                    }
+                for (m, w) in row.iter_mut().enumerate() {
+                    *w = by_node[m * patches + k];
                 }
             });
-        let empty = table.iter().map(Option::is_none).collect();
         Self {
             n,
-            table,
+            patches,
+            slots,
             empty,
             widths,
         }
     }
 
-    /// The four tables to mix for the unit light-frame direction `d` (its grid cell
-    /// found to float precision: a rounding that moves it into a neighbouring cell
-    /// leaves it within every corner's neighbourhood, whose cone has a slack), with the
-    /// bilinear weights of `d`'s place in its grid cell (those of empty tables
-    /// given to the others).
+    /// The four tables to mix for the light-frame direction `d` (non-zero; its grid
+    /// cell found to float precision: a rounding that moves it into a neighbouring
+    /// cell leaves it within every corner's neighbourhood, whose cone has a slack),
+    /// with the bilinear weights of `d`'s place in its grid cell (those of empty
+    /// tables given to the others).
     #[inline]
     pub fn mix(&self, d: Vec3) -> Mix {
         let n = self.n;
-        let [s, t] = unit_sphere_to_square_fast(d);
-        let (x, y) = (s as f64 * n as f64, t as f64 * n as f64);
-        let (i, j) = ((x as usize).min(n - 1), (y as usize).min(n - 1));
+        let [s, t] = sphere_to_octahedral(d);
+        let (x, y) = (s * n as f32, t * n as f32);
+        // `as u32` saturates (and maps NaN to 0); u32 is a cheaper conversion
+        // than usize.
+        let last = (n - 1) as u32;
+        let (i, j) = ((x as u32).min(last), (y as u32).min(last));
         let (fx, fy) = (
-            (x - i as f64).clamp(0.0, 1.0),
-            (y - j as f64).clamp(0.0, 1.0),
+            (x - i as f32).clamp(0.0, 1.0) as f64,
+            (y - j as f32).clamp(0.0, 1.0) as f64,
         );
-        let first = j * (n + 1) + i;
+        let first = j as usize * (n + 1) + i as usize;
         let node = [first, first + 1, first + n + 1, first + n + 2];
         let mut probability = [
             (1.0 - fx) * (1.0 - fy),
@@ -136,18 +156,19 @@ impl Tables {
             (1.0 - fx) * fy,
             fx * fy,
         ];
-        for (p, &k) in probability.iter_mut().zip(&node) {
-            if self.empty[k] {
-                *p = 0.0;
+        let empty = node.map(|k| self.empty[k]);
+        if empty.contains(&true) {
+            for (p, &e) in probability.iter_mut().zip(&empty) {
+                if e {
+                    *p = 0.0;
+                }
             }
-        }
-        let total: f64 = probability.iter().sum();
-        if total > 0.0 {
-            for p in &mut probability {
-                *p /= total;
-            }
-        } else {
-            probability = [0.0; 4];
+            let total: f64 = probability.iter().sum();
+            probability = if total > 0.0 {
+                probability.map(|p| p / total)
+            } else {
+                [0.0; 4]
+            };
         }
         Mix {
             node: node.map(|k| k as u32),
@@ -155,45 +176,83 @@ impl Tables {
         }
     }
 
-    /// The patch node `node`'s table (which has weight) gives `ξ`, and `ξ`
-    /// rescaled within the patch's share.
+    /// The patch node `node`'s table (which has weight) picks for `x ∈ [0, 1)`, and
+    /// `x` rescaled to `[0, 1)` within what gave the patch.
     #[inline]
-    pub fn sample(&self, node: u32, xi: f32) -> (usize, f32) {
-        match &self.table[node as usize] {
-            Some(d) => {
-                let s = d.sample_discrete(xi);
-                (s.index, s.remapped)
-            }
-            None => unreachable!("a mix never picks an empty table"),
-        }
+    pub fn sample(&self, node: u32, x: f64) -> (usize, f64) {
+        let first = node as usize * self.patches;
+        pick::pick(&self.slots[first..first + self.patches], x)
     }
 
     /// The probability of patch `k` in `mix`: `Σ_m P_m · p_m(k)`.
     #[inline]
     pub fn probability(&self, mix: &Mix, k: usize) -> f64 {
-        let widths = &self.widths[k * self.table.len()..(k + 1) * self.table.len()];
-        let mut sum = 0.0;
-        for (&node, &p) in mix.node.iter().zip(&mix.probability) {
-            sum += p * widths[node as usize] as f64;
-        }
+        // The four nodes are `first`, `first + 1`, `first + n + 1` and
+        // `first + n + 2`: one slice, one bounds check.
+        let first = k * self.empty.len() + mix.node[0] as usize;
+        let w = &self.widths[first..first + self.n + 3];
+        let [a, b, c, d] = mix.probability;
+        let sum = (a * w[0] as f64 + b * w[1] as f64)
+            + (c * w[self.n + 1] as f64 + d * w[self.n + 2] as f64);
         sum * (1.0 / CDF_ONE as f64)
+    }
+
+    /// Patch `k`'s width in node `node`'s table.
+    #[cfg(test)]
+    pub fn width(&self, node: u32, k: usize) -> u32 {
+        self.widths[k * self.empty.len() + node as usize]
     }
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        let tables: usize = self
-            .table
-            .iter()
-            .flatten()
-            .map(Distribution1D::memory_bytes)
-            .sum();
-        tables + std::mem::size_of::<Option<Distribution1D>>() * self.table.len()
+        std::mem::size_of::<Slot>() * self.slots.len() + 4 * self.widths.len() + self.empty.len()
     }
 
     /// Nodes (tables).
     pub fn len(&self) -> usize {
-        self.table.len()
+        self.empty.len()
     }
+}
+
+/// An upper bound of the arc length on the sphere per unit length in `[0, 1]²` of
+/// the octahedral map, 6. With `(a, b) = (2u - 1, 2v - 1)`, the map normalises
+/// `p = (a, b, 1 - |a| - |b|)` in the upper half (and the folded
+/// `((1 - |b|) sgn a, (1 - |a|) sgn b, 1 - |a| - |b|)` in the lower), whose
+/// components move by `|da|`, `|db|` and at most `|da| + |db|`, so
+/// `|dp| ≤ √3 |d(a, b)|`; `|p|₁ = 1` gives `|p| ≥ 1/√3`, and normalising moves a
+/// direction by at most `|dp| / |p|`: `|dω| ≤ 3 |d(a, b)| = 6 |d(u, v)|`.
+pub(super) const OCTAHEDRAL_LIPSCHITZ: f64 = 6.0;
+
+/// The grid point `[u, v] ∈ [0, 1]²` of the non-zero direction `d` in the
+/// octahedral map: `d / |d|₁` projected on the plane, the lower half folded
+/// over the diagonals. On a fold either equivalent point is returned.
+#[inline]
+pub(super) fn sphere_to_octahedral(d: Vec3) -> [f32; 2] {
+    let inv_l1 = 1.0 / (d.x.abs() + d.y.abs() + d.z.abs());
+    let (a, b) = (d.x * inv_l1, d.y * inv_l1);
+    let (a, b) = if d.z < 0.0 {
+        ((1.0 - b.abs()).copysign(a), (1.0 - a.abs()).copysign(b))
+    } else {
+        (a, b)
+    };
+    [
+        (0.5 * a + 0.5).clamp(0.0, 1.0),
+        (0.5 * b + 0.5).clamp(0.0, 1.0),
+    ]
+}
+
+/// The unit direction of grid point `[u, v] ∈ [0, 1]²` of the octahedral map (the
+/// inverse of [`sphere_to_octahedral`]), in f64.
+pub(super) fn octahedral_to_sphere(u: f64, v: f64) -> [f64; 3] {
+    let (a, b) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+    let z = 1.0 - a.abs() - b.abs();
+    let (x, y) = if z < 0.0 {
+        ((1.0 - b.abs()).copysign(a), (1.0 - a.abs()).copysign(b))
+    } else {
+        (a, b)
+    };
+    let length = (x * x + y * y + z * z).sqrt();
+    [x / length, y / length, z / length]
 }
 
 /// Node `(a, b)` of an `n`-cell grid: its unit direction, and the sine and cosine
@@ -204,10 +263,7 @@ impl Tables {
 /// axis peaks on the boundary of a region that avoids the antipode (see
 /// `bounds::bounding_cone`). Half-angles of `π/2` and more give the whole sphere.
 pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<(f64, f64)>) {
-    let at = |u: f64, v: f64| {
-        let d = square_to_sphere(u as f32, v as f32);
-        [d.x as f64, d.y as f64, d.z as f64]
-    };
+    let at = octahedral_to_sphere;
     let cell = 1.0 / n as f64;
     let axis = at(a as f64 * cell, b as f64 * cell);
     let length = norm(axis);
@@ -225,7 +281,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
         }
     }
     let step = (u[1] - u[0]).max(v[1] - v[0]) / BOUNDARY_STEPS as f64;
-    let half = farthest + 0.5 * EQUAL_AREA_LIPSCHITZ * step + CONE_SLACK;
+    let half = farthest + 0.5 * OCTAHEDRAL_LIPSCHITZ * step + CONE_SLACK;
     let spread = (half < FRAC_PI_2).then(|| half.sin_cos());
     (Direction::new(axis), spread)
 }

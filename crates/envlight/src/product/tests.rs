@@ -276,7 +276,8 @@ fn neighbourhoods_hold_their_cells() {
                 // A point in the 2 × 2 cells about the node (clipped to the square).
                 let u = ((a as f64 - 1.0 + 2.0 * s as f64) * cell).clamp(0.0, 1.0);
                 let v = ((b as f64 - 1.0 + 2.0 * t as f64) * cell).clamp(0.0, 1.0);
-                let d = crate::equal_area::square_to_sphere(u as f32, v as f32);
+                let d = tables::octahedral_to_sphere(u, v);
+                let d = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
                 let angle = angle(axis.v, d);
                 assert!(
                     angle <= half,
@@ -322,12 +323,8 @@ fn mixed_tables_weight_every_patch_the_factor_sees() {
                 }
                 for (&node, &p) in point.mix.node.iter().zip(&point.mix.probability) {
                     if p > 0.0 {
-                        let single = Mix {
-                            node: [node; 4],
-                            probability: [1.0, 0.0, 0.0, 0.0],
-                        };
                         assert!(
-                            tables.probability(&single, k) > 0.0,
+                            tables.width(node, k) > 0,
                             "{}: {factor:?}: node {node} gives lit patch {k} no weight",
                             case.name
                         );
@@ -646,55 +643,89 @@ fn patches_tile_the_image_and_the_arrays() {
             let p = s.row_patch[j] as usize;
             assert!(s.row_start[p] as usize <= j && j < s.row_start[p + 1] as usize);
         }
-        // The CDF slices tile their arrays, each running from 0 to CDF_ONE.
-        let mut marginal_used = 0;
+        // The patches' cells tile the per-cell arrays in patch order, each patch
+        // holding exactly its block of cells; a lit patch's widths sum to
+        // CDF_ONE and its alias table gives each cell exactly its width.
+        let mut used = 0;
         for k in 0..pw * ph {
-            let m = s.marginal(k);
-            let at = m.as_ptr() as usize - s.marginal_cdf.as_ptr() as usize;
-            assert_eq!(at, 4 * marginal_used);
-            marginal_used += m.len();
-            assert!(m[0] == 0 && m[m.len() - 1] == CDF_ONE);
-        }
-        // (Patches are row-major, so the slices come in order.)
-        assert_eq!(marginal_used, s.marginal_cdf.len());
-        let mut segment_used = 0;
-        for j in 0..h {
-            for c in 0..pw {
-                let seg = s.segment(j, c);
-                let at = seg.as_ptr() as usize - s.segment_cdf.as_ptr() as usize;
-                assert_eq!(at, 4 * segment_used);
-                segment_used += seg.len();
-                assert!(seg[0] == 0 && seg[seg.len() - 1] == CDF_ONE);
+            let (widths, slots) = s.patch(k);
+            let at = widths.as_ptr() as usize - s.widths.as_ptr() as usize;
+            assert_eq!(at, 4 * used);
+            let ([x0, x1], [y0, y1]) = s.patch_cells(k);
+            assert_eq!(widths.len(), (x1 - x0) * (y1 - y0));
+            used += widths.len();
+            let total: u64 = widths.iter().map(|&w| w as u64).sum();
+            assert_eq!(total, if s.power[k] > 0.0 { CDF_ONE as u64 } else { 0 });
+            let mut received = vec![0u128; slots.len()];
+            for (o, slot) in slots.iter().enumerate() {
+                received[o] += slot.threshold as u128;
+                received[slot.alias as usize] += (CDF_ONE - slot.threshold) as u128;
+            }
+            if total > 0 {
+                for (&r, &w) in received.iter().zip(widths) {
+                    assert_eq!(r, widths.len() as u128 * w as u128);
+                }
             }
         }
-        assert_eq!(segment_used, s.segment_cdf.len());
+        assert_eq!(used, s.widths.len());
+        assert_eq!(used, w * h);
         let powers: f64 = s.power.iter().sum();
         assert!((powers - 1.0).abs() < 1e-12, "{powers}");
         assert!(sampler.memory_bytes() >= 4 * w * h);
     }
 }
 
-/// The arc-length bound used for equal-area cones, against the mapping on
-/// short random steps in every direction.
-#[test]
-fn equal_area_lipschitz_bound_holds() {
+/// The largest ratio of arc length to step length of `map` over short random steps
+/// in every direction of `[0, 1]²`.
+fn worst_stretch(map: impl Fn(f64, f64) -> [f64; 3]) -> f64 {
     let mut worst = 0.0f64;
     for k in 0..200_000u64 {
         let [u, v] = xi_2d(21, k);
         let [a, b] = xi_2d(22, k);
         let step = 1e-3 * (0.1 + a as f64);
         let (s, c) = (2.0 * PI * b as f64).sin_cos();
-        let (u2, v2) = (u as f64 + step * c, v as f64 + step * s);
+        let (u, v) = (u as f64, v as f64);
+        let (u2, v2) = (u + step * c, v + step * s);
         if !(0.0..=1.0).contains(&u2) || !(0.0..=1.0).contains(&v2) {
             continue;
         }
-        let p = crate::equal_area::square_to_sphere(u, v);
-        let q = crate::equal_area::square_to_sphere(u2 as f32, v2 as f32);
-        let length = ((u2 - u as f64).powi(2) + (v2 - v as f64).powi(2)).sqrt();
-        worst = worst.max(angle([p.x as f64, p.y as f64, p.z as f64], q) / length);
+        let (p, q) = (map(u, v), map(u2, v2));
+        let q = Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32);
+        let length = ((u2 - u).powi(2) + (v2 - v).powi(2)).sqrt();
+        worst = worst.max(angle(p, q) / length);
     }
+    worst
+}
+
+/// The arc-length bound used for equal-area cones, against the mapping.
+#[test]
+fn equal_area_lipschitz_bound_holds() {
+    let worst = worst_stretch(|u, v| {
+        let d = crate::equal_area::square_to_sphere(u as f32, v as f32);
+        [d.x as f64, d.y as f64, d.z as f64]
+    });
     assert!(worst <= EQUAL_AREA_LIPSCHITZ, "{worst}");
     assert!(worst > 0.5 * EQUAL_AREA_LIPSCHITZ, "a loose bound: {worst}");
+}
+
+/// The arc-length bound of the octahedral grid of normals, against the map; and
+/// the map's forward and inverse agree.
+#[test]
+fn octahedral_lipschitz_bound_holds() {
+    let worst = worst_stretch(tables::octahedral_to_sphere);
+    assert!(worst <= tables::OCTAHEDRAL_LIPSCHITZ, "{worst}");
+    assert!(
+        worst > 0.5 * tables::OCTAHEDRAL_LIPSCHITZ,
+        "a loose bound: {worst}"
+    );
+    for k in 0..100_000u64 {
+        let [u, v] = xi_2d(23, k);
+        let d = tables::octahedral_to_sphere(u as f64, v as f64);
+        let d = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
+        let [s, t] = tables::sphere_to_octahedral(d * 3.5);
+        let back = tables::octahedral_to_sphere(s as f64, t as f64);
+        assert!(angle(back, d) < 1e-5, "({u}, {v}) -> ({s}, {t})");
+    }
 }
 
 /// Sampling efficiency `(∫ Y f dω)² / ∫ (Y f)² / p dω` (1 when `p ∝ Y f`) by

@@ -1,0 +1,134 @@
+//! Where a product shading point's time goes, on one thread, for one fixed normal
+//! (as `envlight bench --normal` measures) and for random normals:
+//! `cargo run --release -p envlight --example product_parts [-- MAP [X,Y,Z]]`.
+//!
+//! Rows (ns, the best of several rounds over 2¹⁹ queries): the light's own sample
+//! and pdf; the product's `at` alone, sample alone (point reused), pdf alone (at the
+//! sample's direction), and a new point + sample + pdf.
+
+use envlight::load::{load, LoadOptions};
+use envlight::{
+    builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
+};
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::Instant;
+
+const QUERIES: usize = 1 << 19;
+const ROUNDS: usize = 5;
+
+/// Rounds per figure: `PRODUCT_PARTS_ROUNDS` (1 under callgrind, say), else 5.
+fn rounds() -> usize {
+    std::env::var("PRODUCT_PARTS_ROUNDS")
+        .ok()
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(ROUNDS)
+}
+
+fn best(mut f: impl FnMut() -> f32) -> f64 {
+    (0..rounds())
+        .map(|_| {
+            let start = Instant::now();
+            black_box(f());
+            start.elapsed().as_secs_f64() * 1e9 / QUERIES as f64
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let image = match args.next() {
+        Some(path) if path != "builtin:sky" => load(path.as_ref(), &LoadOptions::default())?.image,
+        _ => builtin::sky(1024, 512),
+    };
+    let normal = match args.next() {
+        Some(text) => {
+            let v: Vec<f32> = text.split(',').map(str::parse).collect::<Result<_, _>>()?;
+            Vec3::new(v[0], v[1], v[2])
+        }
+        None => Vec3::new(0.0, 0.0, 1.0),
+    };
+    let light = Arc::new(EnvironmentLight::new(image, LightOptions::default())?);
+    let sampler = ProductSampler::new(light.clone(), ProductOptions::default());
+    let xi: Vec<[f32; 2]> = (0..QUERIES as u64)
+        .map(|k| envlight::rng::xi_2d(0xbe7c, k))
+        .collect();
+    let normals: Vec<Factor> = (0..QUERIES as u64)
+        .map(|k| {
+            Factor::cosine(envlight::math::uniform_sphere(envlight::rng::xi_2d(
+                0x5eed, k,
+            )))
+        })
+        .collect();
+    // Every output goes into the sum, as in `envlight bench`, so none is skipped.
+    let digest = |s: envlight::LightSample| {
+        s.pdf + s.direction.x + s.direction.y + s.direction.z + s.radiance[1]
+    };
+    let light_sample = best(|| {
+        xi.iter()
+            .map(|&x| light.sample(x).map_or(0.0, digest))
+            .sum()
+    });
+    let dirs: Vec<Vec3> = xi
+        .iter()
+        .map(|&x| {
+            light
+                .sample(x)
+                .map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction)
+        })
+        .collect();
+    let light_pdf = best(|| dirs.iter().map(|&d| light.pdf(d)).sum());
+    println!("light: sample {light_sample:.1} ns, pdf {light_pdf:.1} ns");
+
+    let factor = Factor::cosine(normal);
+    let at = best(|| {
+        xi.iter()
+            .map(|_| sampler.at(black_box(&factor)).samples_anything() as u32 as f32)
+            .sum()
+    });
+    let point = sampler.at(&factor);
+    let sample = best(|| {
+        xi.iter()
+            .map(|&x| point.sample(x).map_or(0.0, digest))
+            .sum()
+    });
+    let pdirs: Vec<Vec3> = xi
+        .iter()
+        .map(|&x| {
+            point
+                .sample(x)
+                .map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction)
+        })
+        .collect();
+    let pdf = best(|| pdirs.iter().map(|&d| point.pdf(d)).sum());
+    let whole = best(|| {
+        xi.iter()
+            .map(|&x| {
+                let p = sampler.at(black_box(&factor));
+                p.sample(x).map_or(0.0, |s| p.pdf(s.direction) + digest(s))
+            })
+            .sum()
+    });
+    println!(
+        "product, normal ({}, {}, {}): at {at:.1}, sample {sample:.1}, pdf {pdf:.1}, \
+         at+sample+pdf {whole:.1} ns ({:.2}x a light sample)",
+        normal.x,
+        normal.y,
+        normal.z,
+        whole / light_sample
+    );
+    let random = best(|| {
+        xi.iter()
+            .zip(&normals)
+            .map(|(&x, f)| {
+                let p = sampler.at(f);
+                p.sample(x).map_or(0.0, |s| p.pdf(s.direction) + digest(s))
+            })
+            .sum()
+    });
+    println!(
+        "product, random normals: at+sample+pdf {random:.1} ns ({:.2}x a light sample)",
+        random / light_sample
+    );
+    Ok(())
+}
