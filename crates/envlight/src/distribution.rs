@@ -221,7 +221,7 @@ pub(crate) fn place_in_cell_f64(cell: usize, frac: f64, n: usize) -> f32 {
 
 /// Moves `x` (already within a few ulps of cell `cell`) into it, and below 1.
 #[inline(always)]
-fn nudge_into_cell(x: f32, cell: usize, n: usize) -> f32 {
+pub(crate) fn nudge_into_cell(x: f32, cell: usize, n: usize) -> f32 {
     let mut x = x.min(ONE_MINUS_EPSILON);
     for _ in 0..4 {
         match cell_index(x, n).cmp(&cell) {

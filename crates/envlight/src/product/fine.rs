@@ -23,7 +23,7 @@
 use super::bounds::Region;
 use super::pick::{self, Slot};
 use crate::bilinear::sample_linear;
-use crate::distribution::{cell_index, place_in_cell_f64, Distribution1D, CDF_ONE};
+use crate::distribution::{cell_index, nudge_into_cell, Distribution1D, CDF_ONE};
 use crate::light::{bilinear_nodes, Density, EnvironmentLight};
 use rayon::prelude::*;
 
@@ -50,8 +50,8 @@ struct Span {
     /// Cells across and down.
     cols: u32,
     rows: u32,
-    /// Index of the patch's first cell in [`Fine::widths`] and [`Fine::slots`]:
-    /// the patch's cells follow, row by row.
+    /// Index of the patch's first slot in [`Fine::slots`]: the patch's cells
+    /// follow, row by row.
     first: u32,
 }
 
@@ -72,11 +72,14 @@ pub(super) struct Fine {
     /// The patch row of each cell row.
     pub(super) row_patch: Vec<u32>,
     /// Each cell's width in its patch's fixed-point distribution over its cells
-    /// (`q(cell | k) = width / CDF_ONE`; 0 for an unlit cell), patch by patch.
+    /// (`q(cell | k) = width / CDF_ONE`; 0 for an unlit cell), in image order
+    /// (cell `(i, j)` at `j cw + i`), so that a pdf finds it without its patch.
     pub(super) widths: Vec<u32>,
-    /// The alias table of each patch's widths ([`pick`]), laid out as `widths`,
-    /// aliases local to the patch.
+    /// The alias table of each patch's widths ([`pick`]), patch by patch (see
+    /// [`Span::first`]), each patch's cells row by row, aliases local to it.
     pub(super) slots: Vec<Slot>,
+    /// `[1 / w, 1 / h]`: a cell's place in `[0, 1]` by a product, not a division.
+    inv_size: [f64; 2],
     /// Patch `k`'s cells and where they are stored.
     spans: Vec<Span>,
     /// Patch `k = r Pw + c`: its share `P_k = F_k / Σ F` of the density.
@@ -145,8 +148,9 @@ impl Fine {
                 }
             })
             .collect();
-        let mut widths = vec![0u32; cw * ch];
-        let mut slots = vec![Slot::default(); cw * ch];
+        // Sampling reads a slot and a width of a cell drawn anywhere in the map.
+        let mut widths: Vec<u32> = pick::large_table(cw * ch);
+        let mut slots: Vec<Slot> = pick::large_table(cw * ch);
         let mut bands = Vec::with_capacity(ph);
         let (mut band_widths, mut band_slots) = (&mut widths[..], &mut slots[..]);
         for r in 0..ph {
@@ -204,6 +208,7 @@ impl Fine {
             row_patch,
             widths,
             slots,
+            inv_size: [1.0 / w as f64, 1.0 / h as f64],
             power: sums.iter().map(|&s| s * inv_total).collect(),
             regions: Vec::new(),
             centres: Vec::new(),
@@ -247,13 +252,12 @@ impl Fine {
     /// Patch `k`'s cells of non-zero width: `(column, row, width)`.
     fn lit(&self, k: usize) -> impl Iterator<Item = (usize, usize, u32)> + '_ {
         let s = self.spans[k];
-        let (first, cols) = (s.first as usize, s.cols as usize);
-        let n = cols * s.rows as usize;
-        self.widths[first..first + n]
-            .iter()
-            .enumerate()
-            .filter(|(_, &w)| w > 0)
-            .map(move |(o, &w)| (s.x0 as usize + o % cols, s.y0 as usize + o / cols, w))
+        let (x0, y0) = (s.x0 as usize, s.y0 as usize);
+        let (cols, rows) = (s.cols as usize, s.rows as usize);
+        let cw = self.col_patch.len();
+        (y0..y0 + rows)
+            .flat_map(move |j| (x0..x0 + cols).map(move |i| (i, j, self.widths[j * cw + i])))
+            .filter(|&(_, _, w)| w > 0)
     }
 
     /// Patch `k`'s centre of light (see [`Fine::centres`]); +z if it has none.
@@ -305,15 +309,12 @@ impl Fine {
         ([x0, x0 + s.cols as usize], [y0, y0 + s.rows as usize])
     }
 
-    /// Patch `k`'s cell widths and alias slots, its cells row by row.
+    /// Patch `k`'s alias slots, its cells row by row.
     #[inline]
-    pub(super) fn patch(&self, k: usize) -> (&[u32], &[Slot]) {
+    pub(super) fn slots(&self, k: usize) -> &[Slot] {
         let s = &self.spans[k];
         let (first, n) = (s.first as usize, (s.cols * s.rows) as usize);
-        (
-            &self.widths[first..first + n],
-            &self.slots[first..first + n],
-        )
+        &self.slots[first..first + n]
     }
 
     /// The cell holding image coordinate `x ∈ [0, 1]` along `axis`.
@@ -335,28 +336,43 @@ impl Fine {
     /// [`Self::locate`] finds for it) and, for texels, `q(u, v | k)` there as
     /// [`Self::locate`] computes it (for the bilinear density, which varies across
     /// a point's rounding, `None`).
+    ///
+    /// `hint` hears the chosen cell's centre in `(u, v)` as soon as it is known,
+    /// before the point is placed: a caller can start loading the radiance there.
     #[inline]
-    pub fn sample(&self, k: usize, xi: [f64; 2]) -> ([f32; 2], Option<f64>) {
+    pub fn sample(
+        &self,
+        k: usize,
+        xi: [f64; 2],
+        hint: impl FnOnce([f32; 2]),
+    ) -> ([f32; 2], Option<f64>) {
         let s = &self.spans[k];
-        let (widths, slots) = self.patch(k);
-        let (cell, frac_u) = pick::pick(slots, xi[0]);
+        let (cell, frac_u) = pick::pick(self.slots(k), xi[0]);
         let (row, column) = (cell as u32 / s.cols, cell as u32 % s.cols);
         let (i, j) = ((s.x0 + column) as usize, (s.y0 + row) as usize);
         let frac_v = xi[1];
         match &self.cells {
             Cells::Texels => {
                 let [w, h] = self.size;
+                let [su, sv] = self.inv_size;
+                hint([
+                    ((i as f64 + 0.5) * su) as f32,
+                    ((j as f64 + 0.5) * sv) as f32,
+                ]);
+                let width = self.widths[j * w + i];
                 let uv = [
-                    place_in_cell_f64(i, frac_u, w),
-                    place_in_cell_f64(j, frac_v, h),
+                    nudge_into_cell(((i as f64 + frac_u) * su) as f32, i, w),
+                    nudge_into_cell(((j as f64 + frac_v) * sv) as f32, j, h),
                 ];
-                (uv, Some(widths[cell] as f64 * self.texel_scale))
+                (uv, Some(width as f64 * self.texel_scale))
             }
             Cells::Bilinear {
                 values,
                 u_nodes,
                 v_nodes,
             } => {
+                let [su, sv] = self.inv_size;
+                hint([(i as f64 * su) as f32, (j as f64 * sv) as f32]);
                 let [a, b, c, d] = corners(values, self.size[0] + 2, i, j);
                 let y = sample_linear(frac_v, a + b, c + d);
                 let x = sample_linear(frac_u, a + (c - a) * y, b + (d - b) * y);
@@ -394,9 +410,7 @@ impl Fine {
         let (i, j) = (self.cell_of(0, uv[0]), self.cell_of(1, uv[1]));
         let (c, r) = (self.col_patch[i] as usize, self.row_patch[j] as usize);
         let k = r * self.patches[0] + c;
-        let s = &self.spans[k];
-        let local = (j - s.y0 as usize) * s.cols as usize + (i - s.x0 as usize);
-        let width = self.widths[s.first as usize + local];
+        let width = self.widths[j * self.col_patch.len() + i];
         if width == 0 {
             return None;
         }
@@ -465,9 +479,9 @@ fn corners(values: &[f32], mu: usize, i: usize, j: usize) -> [f64; 4] {
 
 /// Builds one band of patches (one patch row, the cells of `band`'s patches, the
 /// band's rows' importance from `fill_rows(first_row, out)`, `cw` values a row):
-/// each patch's fixed-point distribution over its cells into `widths` and its
-/// alias table into `slots` (laid out as in [`Fine`], from the band's first
-/// cell). Returns each patch's importance sum `F_k`, in order.
+/// each patch's fixed-point distribution over its cells into `widths` (the band's
+/// rows, in image order) and its alias table into `slots` (patch by patch, from
+/// the band's first). Returns each patch's importance sum `F_k`, in order.
 fn build_band(
     cw: usize,
     band: &[Span],
@@ -479,7 +493,7 @@ fn build_band(
     let start = band[0].first as usize;
     let mut importance = vec![0.0f32; rows * cw];
     fill_rows(y0, &mut importance);
-    let mut cells = Vec::new();
+    let (mut cells, mut local) = (Vec::new(), Vec::new());
     band.iter()
         .map(|s| {
             let (x0, cols) = (s.x0 as usize, s.cols as usize);
@@ -487,22 +501,25 @@ fn build_band(
             for row in importance.chunks_exact(cw) {
                 cells.extend_from_slice(&row[x0..x0 + cols]);
             }
-            let at = s.first as usize - start;
-            let (widths, slots) = (
-                &mut widths[at..at + cells.len()],
-                &mut slots[at..at + cells.len()],
-            );
             let d = Distribution1D::new(&cells);
-            if d.integral() <= 0.0 || d.integral().is_nan() {
-                // No light: widths 0, nothing to pick.
-                pick::build(widths, slots);
-                return 0.0;
+            let lit = d.integral() > 0.0 && d.integral().is_finite();
+            local.clear();
+            local.extend(
+                d.cdf()
+                    .windows(2)
+                    .map(|c| if lit { c[1] - c[0] } else { 0 }),
+            );
+            let at = s.first as usize - start;
+            // No light: widths 0, and slots that pick nothing.
+            pick::build(&local, &mut slots[at..at + cells.len()]);
+            for (jj, row) in local.chunks_exact(cols).enumerate() {
+                widths[jj * cw + x0..jj * cw + x0 + cols].copy_from_slice(row);
             }
-            for (w, c) in widths.iter_mut().zip(d.cdf().windows(2)) {
-                *w = c[1] - c[0];
+            if lit {
+                d.integral() * cells.len() as f64
+            } else {
+                0.0
             }
-            pick::build(widths, slots);
-            d.integral() * cells.len() as f64
         })
         .collect()
 }

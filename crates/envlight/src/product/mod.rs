@@ -345,14 +345,16 @@ impl ProductSampler {
     }
 
     /// The set of tables for a normalised factor and the light-frame direction
-    /// that indexes them: the normal for the cosine and rough lobes, the mirror
-    /// direction for the others.
-    fn tables_for(&self, factor: &Factor) -> (usize, Vec3) {
+    /// (not always of unit length: the grid's map needs none) that indexes them:
+    /// the normal for the cosine and rough lobes, the mirror direction for the
+    /// others. The normal is taken as `given` (the factor before normalising), so
+    /// that finding it in the grid need not wait for the normalisation.
+    fn tables_for(&self, factor: &Factor, given: &Factor) -> (usize, Vec3) {
         match *factor {
-            Factor::Cosine { normal } => (0, self.light.world_to_local(normal)),
-            Factor::Glossy {
-                normal, roughness, ..
-            } if roughness >= COSINE_FROM_ROUGHNESS => (0, self.light.world_to_local(normal)),
+            Factor::Cosine { .. } => (0, self.light.world_to_local(given.normal())),
+            Factor::Glossy { roughness, .. } if roughness >= COSINE_FROM_ROUGHNESS => {
+                (0, self.light.world_to_local(given.normal()))
+            }
             Factor::Glossy {
                 normal,
                 outgoing,
@@ -398,6 +400,7 @@ impl ShadingPoint<'_> {
     /// Moves this state to a shading point with factor `factor` (`O(1)`; nothing
     /// when the normalised factor is unchanged).
     pub fn set_factor(&mut self, factor: &Factor) {
+        let given = factor;
         let factor = factor.normalized();
         // Bit for bit, so that skipping the work never changes a result (as
         // `-0.0 == 0.0` could).
@@ -408,7 +411,7 @@ impl ShadingPoint<'_> {
         match &factor {
             Some(f) => {
                 let sampler = self.sampler;
-                let (set, direction) = sampler.tables_for(f);
+                let (set, direction) = sampler.tables_for(f, given);
                 self.set = set;
                 self.mix = sampler.tables(set).mix(direction);
                 // A lobe's tables cover every lit patch; the cosine's say whether
@@ -457,31 +460,25 @@ impl ShadingPoint<'_> {
         #[allow(clippy::manual_clamp)]
         let clamp = |x: f32| (x.max(0.0) as f64 + XI_HALF_QUANTUM).min(BELOW_ONE);
         let x = clamp(xi[0]);
-        // The table: the first whose running sum passes x (never one of
-        // probability 0; the last with weight if rounding leaves x past them all).
+        // The table: the first whose running sum passes x, found without branches
+        // (the weights of a renderer's shading points are not predictable). A
+        // table of probability 0 ends where the one before it does, so it is never
+        // the first passed; the last with weight is taken if rounding leaves x past
+        // them all.
         let p = &self.mix.probability;
-        let (mut m, mut below, mut last) = (usize::MAX, 0.0, 0);
-        for (i, &pi) in p.iter().enumerate() {
-            if pi > 0.0 {
-                last = i;
-                if x < below + pi {
-                    m = i;
-                    break;
-                }
-                below += pi;
-            }
-        }
-        if m == usize::MAX {
-            m = last;
-            below -= p[last];
-        }
-        let x = ((x - below) / self.mix.probability[m]).clamp(0.0, BELOW_ONE);
-        let (k, y) = sampler
-            .tables(self.set)
-            .sample(self.mix.node[m], clamp(xi[1]));
-        let (uv, density) = sampler.fine.sample(k, [x, y]);
-
+        let ends = [p[0], p[0] + p[1], p[0] + p[1] + p[2]];
+        let passed = ends.iter().map(|&e| (x >= e) as usize).sum::<usize>();
+        let m = passed.min(self.mix.last as usize);
+        let below = if m == 0 { 0.0 } else { ends[m - 1] };
+        let x = ((x - below) / p[m]).clamp(0.0, BELOW_ONE);
+        let tables = sampler.tables(self.set);
+        let (k, y) = tables.sample(self.mix.node[m], clamp(xi[1]));
+        tables.prefetch(&self.mix, k);
         let light = &sampler.light;
+        let (uv, density) = sampler.fine.sample(k, [x, y], |uv| {
+            light.image().prefetch(uv[0], uv[1]);
+        });
+
         let (local, jacobian) = light.uv_to_local(uv);
         let direction = light.local_to_world(local);
         // A piecewise-constant density is exact at `uv`, whose cell (and so patch)
@@ -490,10 +487,7 @@ impl ShadingPoint<'_> {
         // pdf is evaluated where the caller will, at the returned direction, as
         // the light does.
         let pdf = match density {
-            Some(q) => {
-                let tables = sampler.tables(self.set);
-                (tables.probability(&self.mix, k) * q) as f32 / jacobian
-            }
+            Some(q) => (tables.probability(&self.mix, k) * q) as f32 / jacobian,
             None => self.pdf(direction),
         };
         if !(jacobian > 0.0 && is_positive_finite(pdf)) {

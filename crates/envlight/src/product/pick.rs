@@ -24,6 +24,16 @@ pub(super) struct Slot {
     pub alias: u32,
 }
 
+/// A table of `n` default (all-zero) values whose memory the kernel is asked to
+/// back with 2 MiB pages before it is written: the product sampler reads its
+/// big tables at random places, which with 4 KiB pages would miss the TLB.
+pub(super) fn large_table<T: Clone + Default>(n: usize) -> Vec<T> {
+    let mut table = Vec::with_capacity(n);
+    crate::math::advise_huge_pages(table.spare_capacity_mut());
+    table.resize(n, T::default());
+    table
+}
+
 /// The largest f64 below 1.
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 

@@ -74,6 +74,8 @@ pub(super) struct Tables {
 pub(super) struct Mix {
     pub node: [u32; 4],
     pub probability: [f64; 4],
+    /// The last of the four with a positive probability (0 when none has).
+    pub last: u32,
 }
 
 impl Mix {
@@ -89,7 +91,7 @@ impl Tables {
         let n = n.max(1);
         let patches = fine.power.len();
         let nodes = (n + 1) * (n + 1);
-        let mut slots = vec![Slot::default(); nodes * patches];
+        let mut slots: Vec<Slot> = pick::large_table(nodes * patches);
         let mut by_node = vec![0u32; nodes * patches];
         let empty = slots
             .par_chunks_mut(patches)
@@ -112,7 +114,7 @@ impl Tables {
                 },
             )
             .collect::<Vec<bool>>();
-        let mut widths = vec![0u32; patches * nodes];
+        let mut widths: Vec<u32> = pick::large_table(patches * nodes);
         widths
             .par_chunks_mut(nodes)
             .enumerate()
@@ -170,9 +172,11 @@ impl Tables {
                 [0.0; 4]
             };
         }
+        let last = probability.iter().rposition(|&p| p > 0.0).unwrap_or(0) as u32;
         Mix {
             node: node.map(|k| k as u32),
             probability,
+            last,
         }
     }
 
@@ -195,6 +199,14 @@ impl Tables {
         let sum = (a * w[0] as f64 + b * w[1] as f64)
             + (c * w[self.n + 1] as f64 + d * w[self.n + 2] as f64);
         sum * (1.0 / CDF_ONE as f64)
+    }
+
+    /// Starts loading what [`Self::probability`] of patch `k` in `mix` reads.
+    #[inline(always)]
+    pub fn prefetch(&self, mix: &Mix, k: usize) {
+        let first = k * self.empty.len() + mix.node[0] as usize;
+        crate::math::prefetch_ptr(self.widths.as_ptr().wrapping_add(first));
+        crate::math::prefetch_ptr(self.widths.as_ptr().wrapping_add(first + self.n + 2));
     }
 
     /// Patch `k`'s width in node `node`'s table.

@@ -648,12 +648,16 @@ fn patches_tile_the_image_and_the_arrays() {
         // CDF_ONE and its alias table gives each cell exactly its width.
         let mut used = 0;
         for k in 0..pw * ph {
-            let (widths, slots) = s.patch(k);
-            let at = widths.as_ptr() as usize - s.widths.as_ptr() as usize;
-            assert_eq!(at, 4 * used);
+            let slots = s.slots(k);
+            let at = slots.as_ptr() as usize - s.slots.as_ptr() as usize;
+            assert_eq!(at, std::mem::size_of_val(&slots[0]) * used);
             let ([x0, x1], [y0, y1]) = s.patch_cells(k);
-            assert_eq!(widths.len(), (x1 - x0) * (y1 - y0));
-            used += widths.len();
+            assert_eq!(slots.len(), (x1 - x0) * (y1 - y0));
+            used += slots.len();
+            let widths: Vec<u32> = (y0..y1)
+                .flat_map(|j| (x0..x1).map(move |i| (i, j)))
+                .map(|(i, j)| s.widths[j * w + i])
+                .collect();
             let total: u64 = widths.iter().map(|&w| w as u64).sum();
             assert_eq!(total, if s.power[k] > 0.0 { CDF_ONE as u64 } else { 0 });
             let mut received = vec![0u128; slots.len()];
@@ -662,7 +666,7 @@ fn patches_tile_the_image_and_the_arrays() {
                 received[slot.alias as usize] += (CDF_ONE - slot.threshold) as u128;
             }
             if total > 0 {
-                for (&r, &w) in received.iter().zip(widths) {
+                for (&r, &w) in received.iter().zip(&widths) {
                     assert_eq!(r, widths.len() as u128 * w as u128);
                 }
             }
