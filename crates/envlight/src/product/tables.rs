@@ -62,6 +62,8 @@ pub(super) struct Tables {
     slots: Vec<Slot>,
     /// Whether node `m`'s table is empty (no patch has weight for it).
     empty: Vec<bool>,
+    /// Whether any is (when none is, a shading point need not look).
+    any_empty: bool,
     /// The tables' widths transposed, patch-major: patch `k` of node `m` at
     /// `k (n + 1)² + m` (0 for an empty table). A pdf reads four neighbouring nodes
     /// of one patch, one or two cache lines here instead of four tables.
@@ -80,8 +82,10 @@ pub(super) struct Mix {
 
 impl Mix {
     /// True when no table is mixed: nothing is sampled.
+    #[inline(always)]
     pub fn is_empty(&self) -> bool {
-        self.probability == [0.0; 4]
+        // The last table with weight has none only when none has.
+        self.probability[self.last as usize] <= 0.0
     }
 }
 
@@ -127,6 +131,7 @@ impl Tables {
             n,
             patches,
             slots,
+            any_empty: empty.contains(&true),
             empty,
             widths,
         }
@@ -142,10 +147,15 @@ impl Tables {
         let n = self.n;
         let [s, t] = sphere_to_octahedral(d);
         let (x, y) = (s * n as f32, t * n as f32);
-        // `as u32` saturates (and maps NaN to 0); u32 is a cheaper conversion
-        // than usize.
-        let last = (n - 1) as u32;
-        let (i, j) = ((x as u32).min(last), (y as u32).min(last));
+        let top = (n - 1) as f32;
+        // SAFETY: `max` and `min` return their non-NaN operand, so the values are
+        // in [0, n - 1], where truncation to u32 is defined (and is the floor).
+        let (i, j) = unsafe {
+            (
+                x.max(0.0).min(top).to_int_unchecked::<u32>(),
+                y.max(0.0).min(top).to_int_unchecked::<u32>(),
+            )
+        };
         let (fx, fy) = (
             (x - i as f32).clamp(0.0, 1.0) as f64,
             (y - j as f32).clamp(0.0, 1.0) as f64,
@@ -158,8 +168,8 @@ impl Tables {
             (1.0 - fx) * fy,
             fx * fy,
         ];
-        let empty = node.map(|k| self.empty[k]);
-        if empty.contains(&true) {
+        if self.any_empty {
+            let empty = node.map(|k| self.empty[k]);
             for (p, &e) in probability.iter_mut().zip(&empty) {
                 if e {
                     *p = 0.0;
@@ -172,7 +182,10 @@ impl Tables {
                 [0.0; 4]
             };
         }
-        let last = probability.iter().rposition(|&p| p > 0.0).unwrap_or(0) as u32;
+        let last = [1, 2, 3]
+            .map(|m| if probability[m] > 0.0 { m as u32 } else { 0 })
+            .into_iter()
+            .fold(0, u32::max);
         Mix {
             node: node.map(|k| k as u32),
             probability,
@@ -189,7 +202,7 @@ impl Tables {
     }
 
     /// The probability of patch `k` in `mix`: `Σ_m P_m · p_m(k)`.
-    #[inline]
+    #[inline(always)]
     pub fn probability(&self, mix: &Mix, k: usize) -> f64 {
         // The four nodes are `first`, `first + 1`, `first + n + 1` and
         // `first + n + 2`: one slice, one bounds check.
