@@ -1562,6 +1562,25 @@ fn normal_option_on_every_command() {
         .assert()
         .success();
     check_png(&png, 64);
+
+    // bench --normal adds the product's figures, each a positive number.
+    let out = stdout_of(
+        envlight()
+            .args(["bench", "--json", "--queries", "1024", "--repeat", "2"])
+            .args(normal),
+    );
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for key in [
+        "product_point_ns",
+        "product_sample_ns",
+        "product_pdf_ns",
+        "product_build_ms",
+        "product_bytes",
+        "product_point_ratio",
+    ] {
+        let x = v[key].as_f64().unwrap_or(f64::NAN);
+        assert!(x.is_finite() && x > 0.0, "{key} = {x} in {v}");
+    }
 }
 
 #[test]

@@ -57,7 +57,8 @@ struct Span {
     inv_cols: f64,
 }
 
-/// The fine level: cells, patches, their CDFs and regions (see the module docs).
+/// The fine level: cells, patches, their alias tables and regions (see the module
+/// docs).
 #[derive(Debug, Clone)]
 pub(super) struct Fine {
     cells: Cells,

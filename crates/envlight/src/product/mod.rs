@@ -7,9 +7,11 @@
 //! - *fine* (module `fine`): the light's own density over its cells, the same kind as
 //!   the light draws (piecewise constant over texels, or piecewise bilinear
 //!   between texel centres), cut into `Pw × Ph` rectangular *patches* of cells
-//!   (128 × 64 by default); patch `k` holds the share `P_k` of the density.
+//!   (64 × 32 by default); patch `k` holds the share `P_k` of the density, and an
+//!   exact alias table over its cells (module `pick`).
 //! - *tables* (module `tables`): precomputed once per light, one distribution over the
-//!   patches for each node of an equal-area octahedral grid of directions
+//!   patches, with its exact alias table, for each node of an octahedral grid of
+//!   directions
 //!   ([`ProductOptions::normal_grid`] cells a side). For the cosine, the nodes are
 //!   normals and patch `k`'s weight in node `a`'s table is
 //!   `P_k · max(cos⁺(a·c_k), s · B_k)`, `c_k` the patch's centre direction and `B_k`
@@ -22,8 +24,9 @@
 //! **Sampling.** [`ProductSampler::at`] maps the normal (or mirror direction) into
 //! the grid: in its cell, the four corner nodes get the bilinear weights of its
 //! place there. A sample picks one of the four tables by those weights (`ξ₀`),
-//! a patch from that table (`ξ₁`), then a point of the patch from the light's
-//! density restricted to it (a row, a cell, a point in the cell), mapped
+//! a patch from that table's alias table (`ξ₁`), then a point of the patch from the
+//! light's density restricted to it (a cell from the patch's alias table with what
+//! is left of `ξ₀`, a point in the cell with the rest of both), mapped
 //! to a direction with the light's mapping and rotation. Its density is the
 //! mixture of the four tables:
 //!
@@ -32,7 +35,8 @@
 //! ```
 //!
 //! with `b_m` the bilinear weights, `p_m(k)` patch `k`'s probability in table `m`
-//! (read from the same fixed-point CDF that sampling inverts), `q(u, v | k)` the
+//! (the width of its fixed-point CDF, which its alias table gives exactly),
+//! `q(u, v | k)` the
 //! light's density in `(u, v)` restricted to the patch and renormalised, and
 //! `J = dω / du dv`. [`ShadingPoint::pdf`] computes exactly that, so it is the
 //! density of [`ShadingPoint::sample`]; it integrates to 1; and it is positive
@@ -65,9 +69,9 @@ pub struct ProductOptions {
     /// `None` for [`ProductOptions::default_patches`] of the light's mapping.
     ///
     /// More patches follow the factor more closely within the light's density and
-    /// cost memory in every table (4 bytes per patch per table).
+    /// cost memory in every table (12 bytes per patch per table).
     pub patches: Option<[usize; 2]>,
-    /// Cells per side of the equal-area octahedral grid of normals of the cosine's
+    /// Cells per side of the octahedral grid of normals of the cosine's
     /// tables (`(n + 1)²` tables). `None` for
     /// [`ProductOptions::DEFAULT_NORMAL_GRID`]. Finer grids bound the cosine over
     /// smaller neighbourhoods: fewer samples where it is small, more memory.
@@ -153,14 +157,15 @@ const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 ///
 /// Cost: building is `O(w h)` for the fine level (rows in parallel) plus one
 /// weight per patch per table (tables in parallel). A shading point
-/// ([`Self::at`]) maps one direction into the grid, `O(1)`; a sample is a pick
-/// among four tables, a binary search over the patches, two over a patch's rows
-/// and cells, and the light's mapping and lookup; a pdf reads four table entries
-/// and two CDF widths. Nothing allocates after the build.
+/// ([`Self::at`]) maps one direction into the octahedral grid (an L1 norm and a
+/// division), `O(1)`; a sample is a pick among four tables, two alias-table picks
+/// (a patch, a cell of it: no search), and the light's mapping and lookup; a pdf
+/// reads one cell width and four table entries. Nothing allocates after the build.
 ///
-/// Memory: the fine level's fixed-point CDFs (a bit over 4 bytes per cell), and
-/// 4 bytes per patch per table: `(n + 1)²` tables for the cosine and as many per
-/// glossy roughness at the lobe grid's `n`; see [`Self::memory_bytes`].
+/// Memory: the fine level's cell widths and alias slots (12 bytes per cell), and
+/// 12 bytes per patch per table (an alias slot and a width): `(n + 1)²` tables for
+/// the cosine and as many per glossy roughness at the lobe grid's `n`; see
+/// [`Self::memory_bytes`].
 ///
 /// ```
 /// use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
