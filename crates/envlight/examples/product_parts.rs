@@ -109,6 +109,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .sum()
     });
+    let at_sample = best(|| {
+        xi.iter()
+            .map(|&x| {
+                let p = sampler.at(black_box(&factor));
+                p.sample(x).map_or(0.0, digest)
+            })
+            .sum()
+    });
+    let sample_pdf = best(|| {
+        xi.iter()
+            .map(|&x| point.sample(x).map_or(0.0, |s| point.pdf(s.direction) + digest(s)))
+            .sum()
+    });
+    let light_sample_pdf = best(|| {
+        xi.iter()
+            .map(|&x| light.sample(x).map_or(0.0, |s| light.pdf(s.direction) + digest(s)))
+            .sum()
+    });
+    println!(
+        "at+sample {at_sample:.1}, sample+pdf {sample_pdf:.1}; light sample+pdf {light_sample_pdf:.1}"
+    );
     println!(
         "product, normal ({}, {}, {}): at {at:.1}, sample {sample:.1}, pdf {pdf:.1}, \
          at+sample+pdf {whole:.1} ns ({:.2}x a light sample)",

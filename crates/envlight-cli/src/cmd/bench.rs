@@ -41,8 +41,9 @@ product_pdf_ns (a point reused; pdfs of the same random directions as pdf_ns), \
 product_build_ms (building the product sampler on all threads, fastest of --repeat, \
 next to build_ms), product_bytes (its tables, the light's aside) and \
 product_point_ratio (product_point_ns over one light sample, the two timed in \
-alternating passes, fastest of --repeat each: the ratio that holds on a busy machine, \
-where the separate figures may come from quieter and busier moments); the JSON object \
+alternating rounds, each pass after one that warms the caches, fastest of --repeat \
+each: the ratio that holds on a busy machine, where the separate figures may come \
+from quieter and busier moments); the JSON object \
 gets these keys too.\n\n\
 With --device gpu the queries run on the GPU instead, --queries at a time (the library's \
 WGSL module through wgpu), and the figures are per pass, fastest of --repeat: for \
@@ -376,10 +377,13 @@ fn measure_product(
                 .sum()
         };
         let point_ns = best_ns(&point_pass);
-        // The two in alternating passes, so that both see the same machine.
+        // The two in alternating rounds, so that both see the same machine; in each,
+        // a pass that warms the caches for its kind of query, then the timed one.
         let (mut point_best, mut light_best) = (f64::INFINITY, f64::INFINITY);
         for _ in 0..repeat {
+            black_box(point_pass());
             point_best = point_best.min(ns_per_query(&point_pass, xi.len()));
+            black_box(light_pass());
             light_best = light_best.min(ns_per_query(&light_pass, xi.len()));
         }
         let point_ratio = point_best / light_best;
