@@ -284,6 +284,7 @@ impl ProductSampler {
     fn empty_point(&self) -> ShadingPoint<'_> {
         ShadingPoint {
             sampler: self,
+            given: None,
             factor: None,
             set: 0,
             mix: Mix::default(),
@@ -395,6 +396,8 @@ pub struct ShadingPoint<'a> {
     sampler: &'a ProductSampler,
     /// The normalised factor, `None` when the factor given was invalid.
     factor: Option<Factor>,
+    /// The bits of the factor last given (`None` before the first).
+    given: Option<(u8, [u32; 7])>,
     /// Index of the set of tables in use.
     set: usize,
     /// Its tables mixed here.
@@ -403,15 +406,17 @@ pub struct ShadingPoint<'a> {
 
 impl ShadingPoint<'_> {
     /// Moves this state to a shading point with factor `factor` (`O(1)`; nothing
-    /// when the normalised factor is unchanged).
+    /// when the factor is the one given last).
     pub fn set_factor(&mut self, factor: &Factor) {
-        let given = factor;
-        let factor = factor.normalized();
-        // Bit for bit, so that skipping the work never changes a result (as
-        // `-0.0 == 0.0` could).
-        if Factor::bits(&factor) == Factor::bits(&self.factor) {
+        // The factor as given, bit for bit: the grid cell is found from the normal
+        // as given (see `tables_for`), so only an identical one may skip the work
+        // without changing a result (and `-0.0 == 0.0` could).
+        let given = Factor::bits(&Some(*factor));
+        if given == self.given {
             return;
         }
+        self.given = given;
+        let (given, factor) = (factor, factor.normalized());
         self.factor = factor;
         match &factor {
             Some(f) => {
