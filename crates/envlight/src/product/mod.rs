@@ -276,7 +276,7 @@ impl ProductSampler {
     /// mixes and how. `O(1)`, no allocation; [`ShadingPoint::set_factor`] moves it.
     pub fn at(&self, factor: &Factor) -> ShadingPoint<'_> {
         let mut point = self.empty_point();
-        point.set_factor(factor);
+        point.move_to(factor);
         point
     }
 
@@ -396,8 +396,8 @@ pub struct ShadingPoint<'a> {
     sampler: &'a ProductSampler,
     /// The normalised factor, `None` when the factor given was invalid.
     factor: Option<Factor>,
-    /// The bits of the factor last given (`None` before the first).
-    given: Option<(u8, [u32; 7])>,
+    /// The factor last given, as given (`None` before the first).
+    given: Option<Factor>,
     /// Index of the set of tables in use.
     set: usize,
     /// Its tables mixed here.
@@ -411,11 +411,14 @@ impl ShadingPoint<'_> {
         // The factor as given, bit for bit: the grid cell is found from the normal
         // as given (see `tables_for`), so only an identical one may skip the work
         // without changing a result (and `-0.0 == 0.0` could).
-        let given = Factor::bits(&Some(*factor));
-        if given == self.given {
-            return;
+        if Factor::bits(&Some(*factor)) != Factor::bits(&self.given) {
+            self.move_to(factor);
         }
-        self.given = given;
+    }
+
+    /// [`Self::set_factor`] without the check for an unchanged factor.
+    fn move_to(&mut self, factor: &Factor) {
+        self.given = Some(*factor);
         let (given, factor) = (factor, factor.normalized());
         self.factor = factor;
         match &factor {
