@@ -67,76 +67,41 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let digest = |s: envlight::LightSample| {
         s.pdf + s.direction.x + s.direction.y + s.direction.z + s.radiance[1]
     };
-    let light_sample = best(|| {
-        xi.iter()
-            .map(|&x| light.sample(x).map_or(0.0, digest))
-            .sum()
-    });
+    // One figure: the fastest pass of `query` over every ξ.
+    let per_xi = |query: &dyn Fn([f32; 2]) -> f32| best(|| xi.iter().map(|&x| query(x)).sum());
+    let light_sample = per_xi(&|x| light.sample(x).map_or(0.0, digest));
+    let up = Vec3::new(0.0, 0.0, 1.0);
     let dirs: Vec<Vec3> = xi
         .iter()
-        .map(|&x| {
-            light
-                .sample(x)
-                .map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction)
-        })
+        .map(|&x| light.sample(x).map_or(up, |s| s.direction))
         .collect();
     let light_pdf = best(|| dirs.iter().map(|&d| light.pdf(d)).sum());
     println!("light: sample {light_sample:.1} ns, pdf {light_pdf:.1} ns");
 
     let factor = Factor::cosine(normal);
-    let at = best(|| {
-        xi.iter()
-            .map(|_| sampler.at(black_box(&factor)).samples_anything() as u32 as f32)
-            .sum()
-    });
+    let at = per_xi(&|_| sampler.at(black_box(&factor)).samples_anything() as u32 as f32);
     let point = sampler.at(&factor);
-    let sample = best(|| {
-        xi.iter()
-            .map(|&x| point.sample(x).map_or(0.0, digest))
-            .sum()
-    });
+    let sample = per_xi(&|x| point.sample(x).map_or(0.0, digest));
     let pdirs: Vec<Vec3> = xi
         .iter()
-        .map(|&x| {
-            point
-                .sample(x)
-                .map_or(Vec3::new(0.0, 0.0, 1.0), |s| s.direction)
-        })
+        .map(|&x| point.sample(x).map_or(up, |s| s.direction))
         .collect();
     let pdf = best(|| pdirs.iter().map(|&d| point.pdf(d)).sum());
-    let whole = best(|| {
-        xi.iter()
-            .map(|&x| {
-                let p = sampler.at(black_box(&factor));
-                p.sample(x).map_or(0.0, |s| p.pdf(s.direction) + digest(s))
-            })
-            .sum()
+    // A new shading point per query (`at_sample`, `whole`) or the same one.
+    let whole = per_xi(&|x| {
+        let p = sampler.at(black_box(&factor));
+        p.sample(x).map_or(0.0, |s| p.pdf(s.direction) + digest(s))
     });
-    let at_sample = best(|| {
-        xi.iter()
-            .map(|&x| {
-                let p = sampler.at(black_box(&factor));
-                p.sample(x).map_or(0.0, digest)
-            })
-            .sum()
+    let at_sample = per_xi(&|x| sampler.at(black_box(&factor)).sample(x).map_or(0.0, digest));
+    let sample_pdf = per_xi(&|x| {
+        point
+            .sample(x)
+            .map_or(0.0, |s| point.pdf(s.direction) + digest(s))
     });
-    let sample_pdf = best(|| {
-        xi.iter()
-            .map(|&x| {
-                point
-                    .sample(x)
-                    .map_or(0.0, |s| point.pdf(s.direction) + digest(s))
-            })
-            .sum()
-    });
-    let light_sample_pdf = best(|| {
-        xi.iter()
-            .map(|&x| {
-                light
-                    .sample(x)
-                    .map_or(0.0, |s| light.pdf(s.direction) + digest(s))
-            })
-            .sum()
+    let light_sample_pdf = per_xi(&|x| {
+        light
+            .sample(x)
+            .map_or(0.0, |s| light.pdf(s.direction) + digest(s))
     });
     println!(
         "at+sample {at_sample:.1}, sample+pdf {sample_pdf:.1}; light sample+pdf {light_sample_pdf:.1}"

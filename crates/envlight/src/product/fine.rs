@@ -23,7 +23,7 @@
 use super::bounds::Region;
 use super::pick::{self, Slot};
 use crate::bilinear::sample_linear;
-use crate::distribution::{cell_index, nudge_into_cell, Distribution1D, CDF_ONE};
+use crate::distribution::{cell_index, nudge_into_cell, CDF_ONE};
 use crate::light::{bilinear_nodes, Density, EnvironmentLight};
 use rayon::prelude::*;
 
@@ -508,25 +508,15 @@ fn build_band(
             for row in importance.chunks_exact(cw) {
                 cells.extend_from_slice(&row[x0..x0 + cols]);
             }
-            let d = Distribution1D::new(&cells);
-            let lit = d.integral() > 0.0 && d.integral().is_finite();
-            local.clear();
-            local.extend(
-                d.cdf()
-                    .windows(2)
-                    .map(|c| if lit { c[1] - c[0] } else { 0 }),
-            );
+            local.resize(cells.len(), 0);
+            let sum = pick::fixed_point_widths(&cells, &mut local);
             let at = s.first as usize - start;
             // No light: widths 0, and slots that pick nothing.
             pick::build(&local, &mut slots[at..at + cells.len()]);
             for (jj, row) in local.chunks_exact(cols).enumerate() {
                 widths[jj * cw + x0..jj * cw + x0 + cols].copy_from_slice(row);
             }
-            if lit {
-                d.integral() * cells.len() as f64
-            } else {
-                0.0
-            }
+            sum
         })
         .collect()
 }

@@ -14,7 +14,7 @@
 //! `T_s / C`) returns cell `i` with probability `w_i / C`, the width the pdf reads.
 //! A cell of width 0 has `T = 0` and is nobody's alias, so it is never returned.
 
-use crate::distribution::CDF_ONE;
+use crate::distribution::{Distribution1D, CDF_ONE};
 
 /// One slot: keep the slot's own cell below `threshold` (of [`CDF_ONE`] units),
 /// else take `alias`.
@@ -32,6 +32,36 @@ pub(super) fn large_table<T: Clone + Default>(n: usize) -> Vec<T> {
     crate::math::advise_huge_pages(table.spare_capacity_mut());
     table.resize(n, T::default());
     table
+}
+
+/// The fixed-point distribution of the weights `f` as its cells' widths, written
+/// to `widths` (as long as `f`): they sum to [`CDF_ONE`], every positive weight
+/// keeping at least one unit, or are all 0 when `f` has no positive, finite sum.
+/// Returns that sum (0 in the second case).
+pub(super) fn fixed_point_widths(f: &[f32], widths: &mut [u32]) -> f64 {
+    let d = Distribution1D::new(f);
+    let sum = d.integral() * f.len() as f64;
+    let lit = sum > 0.0 && sum.is_finite();
+    for (w, c) in widths.iter_mut().zip(d.cdf().windows(2)) {
+        *w = if lit { c[1] - c[0] } else { 0 };
+    }
+    if lit {
+        sum
+    } else {
+        0.0
+    }
+}
+
+/// The units each cell receives over all `slots` (`n w_i` for an exact table of
+/// widths `w`).
+#[cfg(test)]
+pub(super) fn received(slots: &[Slot]) -> Vec<u128> {
+    let mut got = vec![0u128; slots.len()];
+    for (s, slot) in slots.iter().enumerate() {
+        got[s] += slot.threshold as u128;
+        got[slot.alias as usize] += (CDF_ONE - slot.threshold) as u128;
+    }
+    got
 }
 
 /// The largest f64 below 1.
@@ -116,18 +146,7 @@ pub(super) fn pick(slots: &[Slot], x: f64) -> (usize, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::distribution::Distribution1D;
     use crate::rng::SplitMix64;
-
-    /// The units each cell receives over all slots.
-    fn received(slots: &[Slot]) -> Vec<u128> {
-        let mut got = vec![0u128; slots.len()];
-        for (s, slot) in slots.iter().enumerate() {
-            got[s] += slot.threshold as u128;
-            got[slot.alias as usize] += (CDF_ONE - slot.threshold) as u128;
-        }
-        got
-    }
 
     #[test]
     fn every_cell_receives_exactly_its_width() {
@@ -143,9 +162,9 @@ mod tests {
                         }
                     })
                     .collect();
-                let d = Distribution1D::new(&f);
-                let widths: Vec<u32> = d.cdf().windows(2).map(|c| c[1] - c[0]).collect();
-                if f.iter().all(|&v| v == 0.0) {
+                let mut widths = vec![0u32; n];
+                if fixed_point_widths(&f, &mut widths) == 0.0 {
+                    assert!(f.iter().all(|&v| v == 0.0) && widths.iter().all(|&w| w == 0));
                     continue;
                 }
                 let mut slots = vec![Slot::default(); n];

@@ -22,7 +22,7 @@ use super::factor::lobe_proxy;
 use super::fine::Fine;
 use super::pick::{self, Slot};
 use super::PatchBound;
-use crate::distribution::{Distribution1D, CDF_ONE};
+use crate::distribution::CDF_ONE;
 use crate::math::Vec3;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_PI_2;
@@ -106,15 +106,10 @@ impl Tables {
                 |weights, (node, (slots, widths))| {
                     let (axis, spread) = neighbourhood(n, node % (n + 1), node / (n + 1));
                     fill_weights(fine, &axis, spread, lobe, bound, weights);
-                    let any = weights.iter().any(|&w| w > 0.0);
-                    if any {
-                        let d = Distribution1D::new(weights);
-                        for (w, c) in widths.iter_mut().zip(d.cdf().windows(2)) {
-                            *w = c[1] - c[0];
-                        }
-                    }
+                    // An empty table: widths 0, and slots that pick nothing.
+                    let empty = pick::fixed_point_widths(weights, widths) == 0.0;
                     pick::build(widths, slots);
-                    !any
+                    empty
                 },
             )
             .collect::<Vec<bool>>();

@@ -660,13 +660,8 @@ fn patches_tile_the_image_and_the_arrays() {
                 .collect();
             let total: u64 = widths.iter().map(|&w| w as u64).sum();
             assert_eq!(total, if s.power[k] > 0.0 { CDF_ONE as u64 } else { 0 });
-            let mut received = vec![0u128; slots.len()];
-            for (o, slot) in slots.iter().enumerate() {
-                received[o] += slot.threshold as u128;
-                received[slot.alias as usize] += (CDF_ONE - slot.threshold) as u128;
-            }
             if total > 0 {
-                for (&r, &w) in received.iter().zip(&widths) {
+                for (&r, &w) in super::pick::received(slots).iter().zip(&widths) {
                     assert_eq!(r, widths.len() as u128 * w as u128);
                 }
             }
