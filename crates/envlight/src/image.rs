@@ -419,6 +419,10 @@ impl EnvImage {
 /// weights of non-negative texels: the result needs no clamp.
 #[inline(always)]
 fn blend([a, b, c, d]: [[f32; 3]; 4], fs: f32, ft: f32) -> [f32; 3] {
+    // A NaN point (from a NaN or infinite direction) gives NaN weights; `max`
+    // turns them into 0, so a lookup never returns NaN. Weights of a finite point
+    // are in [0, 1) already and pass unchanged.
+    let (fs, ft) = (fs.max(0.0), ft.max(0.0));
     let (gs, gt) = (1.0 - fs, 1.0 - ft);
     let weights = [gs * gt, fs * gt, gs * ft, fs * ft];
     let mut out = [0.0f32; 3];

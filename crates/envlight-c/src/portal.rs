@@ -1,0 +1,169 @@
+//! Portals: the light seen only through windows (planar convex quads), sampled
+//! from a point in proportion to the radiance that comes through them
+//! (DESIGN.md §6d).
+
+use std::sync::Arc;
+
+use crate::{
+    as_vec3, deref, deref_mut, draw_batch, envlight_light, envlight_sample, envlight_status, put,
+    read, run, slice, slice_mut, to_c, value, vec3, Failure,
+};
+use envlight::portal::{Portal, PortalLight, PortalOptions};
+
+/// A light seen through portals. Opaque; a `const` pointer serves any number of
+/// threads (each portal's tables are built, once, the first time a point on its
+/// side asks). It keeps the light alive; free it with `envlight_portal_light_free`.
+pub struct envlight_portal_light {
+    light: PortalLight,
+}
+
+/// Builds a portal light over `light` from `count` portals at `corners`
+/// (`count · 12` floats: each portal's four corners `x, y, z`, in order around a
+/// planar convex quad, either winding; world frame). `resolution` is the cells
+/// along each side of a portal's table (0: the light image's height clamped to
+/// [32, 1024]). At most 8 portals. A bad quad is `ENVLIGHT_ERROR_INVALID_ARGUMENT`
+/// with a message naming the portal (from 0) and what is wrong.
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_new(
+    light: *const envlight_light,
+    corners: *const f32,
+    count: usize,
+    resolution: u32,
+    out: *mut *mut envlight_portal_light,
+) -> envlight_status {
+    const F: &str = "envlight_portal_light_new";
+    run(F, || {
+        let out = unsafe { deref_mut(out, F, "out") }?;
+        *out = std::ptr::null_mut();
+        let light = unsafe { deref(light, F, "light") }?;
+        if count == 0 {
+            return Err(Failure::argument(F, "count must be at least 1"));
+        }
+        let quads: &[[f32; 12]] = unsafe { slice(corners, count, F, "corners") }?;
+        let portals = quads
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let p = |i: usize| vec3([c[3 * i], c[3 * i + 1], c[3 * i + 2]]);
+                Portal::new([p(0), p(1), p(2), p(3)])
+                    .map_err(|e| Failure::argument(F, format_args!("portal {k}: {e}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let options = PortalOptions {
+            resolution: (resolution != 0).then_some(resolution as usize),
+        };
+        let portal_light = PortalLight::new(Arc::clone(&light.light), &portals, options)
+            .map_err(|e| Failure::argument(F, e))?;
+        put(
+            out,
+            envlight_portal_light {
+                light: portal_light,
+            },
+        );
+        Ok(())
+    })
+}
+
+/// Frees a portal light (NULL: nothing).
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_free(light: *mut envlight_portal_light) {
+    if !light.is_null() {
+        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            drop(unsafe { Box::from_raw(light) })
+        }));
+    }
+}
+
+/// Draws a direction from the point `point` through the portals, for `u` in
+/// [0, 1)², in proportion to the radiance seen through them. False (and `*out`
+/// zeroed) when nothing lit is seen through a portal from `point`, `u` or `point`
+/// is not finite, or an argument is NULL.
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_sample(
+    light: *const envlight_portal_light,
+    point: *const f32,
+    u: *const f32,
+    out: *mut envlight_sample,
+) -> bool {
+    const F: &str = "envlight_portal_light_sample";
+    value(F, false, || {
+        let out = unsafe { deref_mut(out, F, "out") }?;
+        *out = envlight_sample::default();
+        let light = unsafe { deref(light, F, "light") }?;
+        let p = unsafe { read(point, F, "point") }?;
+        let u = unsafe { read(u, F, "u") }?;
+        if u[0].is_finite() && u[1].is_finite() {
+            *out = to_c(light.light.sample(vec3(p), u));
+        }
+        Ok(out.pdf > 0.0)
+    })
+}
+
+/// The density (per steradian) with which `envlight_portal_light_sample` draws
+/// `direction` from `point`: 0 for a direction through no portal and for NULL
+/// arguments.
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_pdf(
+    light: *const envlight_portal_light,
+    point: *const f32,
+    direction: *const f32,
+) -> f32 {
+    const F: &str = "envlight_portal_light_pdf";
+    value(F, 0.0, || {
+        let light = unsafe { deref(light, F, "light") }?;
+        let p = unsafe { read(point, F, "point") }?;
+        let d = unsafe { read(direction, F, "direction") }?;
+        Ok(light.light.pdf(vec3(p), vec3(d)))
+    })
+}
+
+/// `envlight_portal_light_sample` for `n` points (`points[3i..3i+3]` with
+/// `u[2i], u[2i+1]`), written to `out[i]`, in parallel.
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_sample_batch(
+    light: *const envlight_portal_light,
+    points: *const f32,
+    u: *const f32,
+    n: usize,
+    out: *mut envlight_sample,
+) -> envlight_status {
+    const F: &str = "envlight_portal_light_sample_batch";
+    run(F, || {
+        let light = &unsafe { deref(light, F, "light") }?.light;
+        let points: &[[f32; 3]] = unsafe { slice(points, n, F, "points") }?;
+        let points = as_vec3(points);
+        let u: &[[f32; 2]] = unsafe { slice(u, n, F, "u") }?;
+        let out: &mut [[envlight_sample; 1]] = unsafe { slice_mut(out, n, F, "out") }?;
+        draw_batch(out.as_flattened_mut(), |range, samples| {
+            let u = &u[range.clone()];
+            light.sample_batch(&points[range], u, samples);
+            for (s, u) in samples.iter_mut().zip(u) {
+                if !(u[0].is_finite() && u[1].is_finite()) {
+                    *s = None;
+                }
+            }
+        });
+        Ok(())
+    })
+}
+
+/// `envlight_portal_light_pdf` for `n` points and directions, written to `pdf[i]`,
+/// in parallel.
+#[no_mangle]
+pub extern "C" fn envlight_portal_light_pdf_batch(
+    light: *const envlight_portal_light,
+    points: *const f32,
+    directions: *const f32,
+    n: usize,
+    pdf: *mut f32,
+) -> envlight_status {
+    const F: &str = "envlight_portal_light_pdf_batch";
+    run(F, || {
+        let light = &unsafe { deref(light, F, "light") }?.light;
+        let points: &[[f32; 3]] = unsafe { slice(points, n, F, "points") }?;
+        let dirs: &[[f32; 3]] = unsafe { slice(directions, n, F, "directions") }?;
+        let out: &mut [[f32; 1]] = unsafe { slice_mut(pdf, n, F, "pdf") }?;
+        light.pdf_batch(as_vec3(points), as_vec3(dirs), out.as_flattened_mut());
+        Ok(())
+    })
+}

@@ -1,0 +1,198 @@
+//! Product sampling at shading points: directions drawn in proportion to the
+//! light's radiance times a factor of the surface (DESIGN.md §6a).
+
+use std::sync::Arc;
+
+use envlight::{Factor, ProductOptions, ProductSampler};
+use rayon::prelude::*;
+
+use crate::{
+    as_vec3, deref, deref_mut, draw_batch, envlight_light, envlight_sample, envlight_status, put,
+    read, run, slice, slice_mut, to_c, value, vec3, CHUNK,
+};
+
+/// A product sampler over a light: its tables for every surface normal, built once
+/// (tens of milliseconds and a few bytes per texel; `envlight_product_memory_bytes`).
+/// Opaque and immutable: a `const` pointer serves any number of threads. It keeps
+/// the light alive; free it with `envlight_product_free`.
+pub struct envlight_product {
+    product: ProductSampler,
+}
+
+/// What multiplies the light's radiance at a shading point (world frame; vectors
+/// need not be unit length).
+///
+/// - `roughness == 0`: the clamped cosine `max(0, n·ω)` of a diffuse surface;
+///   `outgoing` is ignored.
+/// - `0 < roughness <= 1`: the clamped cosine times a GGX lobe proxy of that
+///   roughness about the mirror direction of `outgoing` (towards the viewer).
+///
+/// A zero or non-finite `normal` (or `outgoing`, when used), or a `roughness`
+/// outside `[0, 1]`, samples nothing: `false` and pdf 0.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct envlight_factor {
+    /// The surface normal `n`.
+    pub normal: [f32; 3],
+    /// The outgoing direction `ωo`, for a glossy factor.
+    pub outgoing: [f32; 3],
+    /// 0 for the cosine alone; the GGX roughness `α ∈ (0, 1]` for a glossy lobe.
+    pub roughness: f32,
+}
+
+/// The library's factor.
+#[inline(always)]
+fn factor(f: &envlight_factor) -> Factor {
+    if f.roughness == 0.0 {
+        Factor::cosine(vec3(f.normal))
+    } else {
+        Factor::glossy(vec3(f.normal), vec3(f.outgoing), f.roughness)
+    }
+}
+
+/// Builds the product sampler of `light` (default options: the light's own density
+/// within patches, tables over an octahedral grid of normals). `*out` holds it on
+/// success (NULL on failure).
+#[no_mangle]
+pub extern "C" fn envlight_product_new(
+    light: *const envlight_light,
+    out: *mut *mut envlight_product,
+) -> envlight_status {
+    const F: &str = "envlight_product_new";
+    run(F, || {
+        let out = unsafe { deref_mut(out, F, "out") }?;
+        *out = std::ptr::null_mut();
+        let light = unsafe { deref(light, F, "light") }?;
+        let product = ProductSampler::new(Arc::clone(&light.light), ProductOptions::default());
+        put(out, envlight_product { product });
+        Ok(())
+    })
+}
+
+/// Frees a product sampler (NULL: nothing).
+#[no_mangle]
+pub extern "C" fn envlight_product_free(product: *mut envlight_product) {
+    if !product.is_null() {
+        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            drop(unsafe { Box::from_raw(product) })
+        }));
+    }
+}
+
+/// Bytes of the product sampler's tables.
+#[no_mangle]
+pub extern "C" fn envlight_product_memory_bytes(product: *const envlight_product) -> u64 {
+    const F: &str = "envlight_product_memory_bytes";
+    value(F, 0, || {
+        let p = unsafe { deref(product, F, "product") }?;
+        Ok(p.product.memory_bytes() as u64)
+    })
+}
+
+/// Draws a direction for `u` in [0, 1)² with density proportional to radiance ×
+/// `factor` (up to the tables' resolution; the pdf is exact). Returns false and
+/// zeroes `*out` when nothing lit is seen by the factor, the factor is invalid,
+/// `u` is not finite, or an argument is NULL.
+#[no_mangle]
+pub extern "C" fn envlight_product_sample(
+    product: *const envlight_product,
+    factor: *const envlight_factor,
+    u: *const f32,
+    out: *mut envlight_sample,
+) -> bool {
+    const F: &str = "envlight_product_sample";
+    value(F, false, || {
+        let out = unsafe { deref_mut(out, F, "out") }?;
+        *out = envlight_sample::default();
+        let p = unsafe { deref(product, F, "product") }?;
+        let f = unsafe { deref(factor, F, "factor") }?;
+        let u = unsafe { read(u, F, "u") }?;
+        if u[0].is_finite() && u[1].is_finite() {
+            *out = to_c(p.product.sample(&self::factor(f), u));
+        }
+        Ok(out.pdf > 0.0)
+    })
+}
+
+/// The density (per steradian) with which `envlight_product_sample` draws the unit
+/// world direction `direction` at `factor`; 0 for NULL arguments.
+#[no_mangle]
+pub extern "C" fn envlight_product_pdf(
+    product: *const envlight_product,
+    factor: *const envlight_factor,
+    direction: *const f32,
+) -> f32 {
+    const F: &str = "envlight_product_pdf";
+    value(F, 0.0, || {
+        let p = unsafe { deref(product, F, "product") }?;
+        let f = unsafe { deref(factor, F, "factor") }?;
+        let d = unsafe { read(direction, F, "direction") }?;
+        Ok(p.product.pdf(&self::factor(f), vec3(d)))
+    })
+}
+
+/// `envlight_product_sample` for each of `n` shading points: `factors[i]` and
+/// `u[2i], u[2i+1]` give `out[i]`, in parallel; independent of the thread count.
+#[no_mangle]
+pub extern "C" fn envlight_product_sample_batch(
+    product: *const envlight_product,
+    factors: *const envlight_factor,
+    u: *const f32,
+    n: usize,
+    out: *mut envlight_sample,
+) -> envlight_status {
+    const F: &str = "envlight_product_sample_batch";
+    run(F, || {
+        let p = &unsafe { deref(product, F, "product") }?.product;
+        let factors: &[[envlight_factor; 1]] = unsafe { slice(factors, n, F, "factors") }?;
+        let factors = factors.as_flattened();
+        let u: &[[f32; 2]] = unsafe { slice(u, n, F, "u") }?;
+        let out: &mut [[envlight_sample; 1]] = unsafe { slice_mut(out, n, F, "out") }?;
+        draw_batch(out.as_flattened_mut(), |range, samples| {
+            let u = &u[range.clone()];
+            let f: Vec<Factor> = factors[range].iter().map(factor).collect();
+            p.sample_batch(&f, u, samples);
+            for (s, u) in samples.iter_mut().zip(u) {
+                if !(u[0].is_finite() && u[1].is_finite()) {
+                    *s = None;
+                }
+            }
+        });
+        Ok(())
+    })
+}
+
+/// `envlight_product_pdf` for each of `n` shading points: `factors[i]` and the
+/// direction `directions[3i..3i+3]` give `pdf[i]`, in parallel.
+#[no_mangle]
+pub extern "C" fn envlight_product_pdf_batch(
+    product: *const envlight_product,
+    factors: *const envlight_factor,
+    directions: *const f32,
+    n: usize,
+    pdf: *mut f32,
+) -> envlight_status {
+    const F: &str = "envlight_product_pdf_batch";
+    run(F, || {
+        let p = &unsafe { deref(product, F, "product") }?.product;
+        let factors: &[[envlight_factor; 1]] = unsafe { slice(factors, n, F, "factors") }?;
+        let factors = factors.as_flattened();
+        let dirs: &[[f32; 3]] = unsafe { slice(directions, n, F, "directions") }?;
+        let out: &mut [[f32; 1]] = unsafe { slice_mut(pdf, n, F, "pdf") }?;
+        out.as_flattened_mut()
+            .par_chunks_mut(CHUNK)
+            .zip(factors.par_chunks(CHUNK))
+            .zip(as_vec3(dirs).par_chunks(CHUNK))
+            .for_each(|((out, factors), dirs)| {
+                let f: Vec<Factor> = factors.iter().map(factor).collect();
+                p.pdf_batch(&f, dirs, out);
+            });
+        Ok(())
+    })
+}
+
+/// The library's factor of a C factor, for the crate's tests.
+#[cfg(test)]
+pub(crate) fn tests_factor(f: &envlight_factor) -> Factor {
+    factor(f)
+}

@@ -1,0 +1,151 @@
+//! Sun extraction: the map's brightest compact source as a uniform disc, and the
+//! map without it (DESIGN.md §6d).
+
+use envlight::{SunExtraction, SunOptions};
+
+use crate::{
+    deref, deref_mut, envlight_light, envlight_status, put, run, slice_mut, value, Failure,
+};
+
+/// What `envlight_light_extract_sun` found. Opaque and immutable; free it with
+/// `envlight_sun_extraction_free`.
+pub struct envlight_sun_extraction {
+    extraction: SunExtraction,
+}
+
+/// A compact bright source as a uniform disc. Radiometric values are linear RGB
+/// with the light's scale applied; the direction is in the world frame (the
+/// light's rotation applied), z up.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct envlight_sun {
+    /// Unit direction towards the disc's centre.
+    pub direction: [f32; 3],
+    /// Angular radius of the disc, in degrees.
+    pub angular_radius_deg: f64,
+    /// Solid angle of the disc, `2π (1 − cos r)`, in steradians.
+    pub solid_angle_sr: f64,
+    /// The disc's uniform radiance.
+    pub radiance: [f64; 3],
+    /// Irradiance at normal incidence, `L π sin² r`.
+    pub irradiance: [f64; 3],
+    /// The source's share of the map's `∫ Y dω`, in [0, 1].
+    pub power_fraction: f64,
+    /// Elevation above the horizon (the xy plane), in degrees.
+    pub elevation_deg: f64,
+    /// Azimuth in [0, 360) degrees, from +x towards +y.
+    pub azimuth_deg: f64,
+    /// The disc's mean luminance over the surrounding sky's median (+∞ on a black sky).
+    pub contrast: f64,
+}
+
+/// Looks for the light's sun (radius <= 5°, contrast >= 20, >= 1% of the power) and
+/// in-paints it out of a copy of the image. `*out` holds the result on success
+/// (NULL on failure); whether a sun was found is `envlight_sun_extraction_sun`'s
+/// answer.
+#[no_mangle]
+pub extern "C" fn envlight_light_extract_sun(
+    light: *const envlight_light,
+    out: *mut *mut envlight_sun_extraction,
+) -> envlight_status {
+    const F: &str = "envlight_light_extract_sun";
+    run(F, || {
+        let out = unsafe { deref_mut(out, F, "out") }?;
+        *out = std::ptr::null_mut();
+        let light = unsafe { deref(light, F, "light") }?;
+        let extraction = light.light.extract_sun(&SunOptions::default());
+        put(out, envlight_sun_extraction { extraction });
+        Ok(())
+    })
+}
+
+/// Frees a sun extraction (NULL: nothing).
+#[no_mangle]
+pub extern "C" fn envlight_sun_extraction_free(extraction: *mut envlight_sun_extraction) {
+    if !extraction.is_null() {
+        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            drop(unsafe { Box::from_raw(extraction) })
+        }));
+    }
+}
+
+/// Writes the sun to `*sun` and returns true; false (and `*sun` zeroed) when the
+/// map has none or an argument is NULL.
+#[no_mangle]
+pub extern "C" fn envlight_sun_extraction_sun(
+    extraction: *const envlight_sun_extraction,
+    sun: *mut envlight_sun,
+) -> bool {
+    const F: &str = "envlight_sun_extraction_sun";
+    value(F, false, || {
+        let out = unsafe { deref_mut(sun, F, "sun") }?;
+        *out = envlight_sun::default();
+        let e = unsafe { deref(extraction, F, "extraction") }?;
+        let Some(s) = e.extraction.sun else {
+            return Ok(false);
+        };
+        *out = envlight_sun {
+            direction: s.direction.to_array(),
+            angular_radius_deg: s.angular_radius_deg(),
+            solid_angle_sr: s.solid_angle,
+            radiance: s.radiance,
+            irradiance: s.irradiance,
+            power_fraction: s.power_fraction,
+            elevation_deg: s.elevation_deg(),
+            azimuth_deg: s.azimuth_deg(),
+            contrast: s.contrast,
+        };
+        Ok(true)
+    })
+}
+
+/// The residual image's size (the light's image's), written to `*width` and
+/// `*height`, and the number of texels in-painted as the return value (0 also for
+/// NULL arguments).
+#[no_mangle]
+pub extern "C" fn envlight_sun_extraction_residual_size(
+    extraction: *const envlight_sun_extraction,
+    width: *mut u32,
+    height: *mut u32,
+) -> u64 {
+    const F: &str = "envlight_sun_extraction_residual_size";
+    value(F, 0, || {
+        let e = unsafe { deref(extraction, F, "extraction") }?;
+        let r = &e.extraction.residual;
+        *unsafe { deref_mut(width, F, "width") }? = r.width() as u32;
+        *unsafe { deref_mut(height, F, "height") }? = r.height() as u32;
+        Ok(e.extraction.inpainted_texels as u64)
+    })
+}
+
+/// Copies the residual image (the map without its sun, in the image's own units:
+/// the scale not applied; the image itself when there is no sun) into `rgb`, which
+/// holds `len` floats: at least `width · height · 3`, rows from the top. With the
+/// disc it reproduces the map's irradiance at any normal that does not graze the
+/// sun; build a light from it with `envlight_light_from_rgb` and the same options.
+#[no_mangle]
+pub extern "C" fn envlight_sun_extraction_residual(
+    extraction: *const envlight_sun_extraction,
+    rgb: *mut f32,
+    len: usize,
+) -> envlight_status {
+    const F: &str = "envlight_sun_extraction_residual";
+    run(F, || {
+        let e = unsafe { deref(extraction, F, "extraction") }?;
+        let texels = e.extraction.residual.texels();
+        if len < 3 * texels.len() {
+            return Err(Failure::argument(
+                F,
+                format_args!(
+                    "len is {len}, but the residual has {} floats ({}x{}x3)",
+                    3 * texels.len(),
+                    e.extraction.residual.width(),
+                    e.extraction.residual.height()
+                ),
+            ));
+        }
+        let out: &mut [[f32; 3]] = unsafe { slice_mut(rgb, texels.len(), F, "rgb") }?;
+        out.copy_from_slice(texels);
+        Ok(())
+    })
+}
