@@ -1,0 +1,319 @@
+// envlight.hpp: a C++17 interface over envlight.h, header-only.
+//
+// Move-only owners of the C handles, errors as envlight::error (the status and the
+// library's message), batch calls over contiguous ranges. Every number is the C
+// API's, which is the Rust library's, bit for bit. Reference: docs/c-api.md.
+// Licence: MIT OR Apache-2.0.
+//
+//   envlight::light light = envlight::light::load("sky.exr");
+//   std::vector<envlight_sample> out(n);
+//   light.sample(u, out);  // u: 2n floats
+#ifndef ENVLIGHT_HPP
+#define ENVLIGHT_HPP
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "envlight.h"
+
+namespace envlight {
+
+/// A failed call: the status and this thread's message from the library.
+class error : public std::runtime_error {
+public:
+    error(envlight_status status, const std::string &message)
+        : std::runtime_error(message), status_(status) {}
+    /// What kind of failure (never ENVLIGHT_OK).
+    envlight_status status() const noexcept { return status_; }
+
+private:
+    envlight_status status_;
+};
+
+namespace detail {
+
+/// This thread's last error message.
+inline std::string last_error() {
+    std::string message(envlight_last_error(nullptr, 0), '\0');
+    envlight_last_error(message.data(), message.size() + 1);
+    return message;
+}
+
+/// Throws envlight::error unless `status` is ENVLIGHT_OK.
+inline void check(envlight_status status) {
+    if (status != ENVLIGHT_OK) {
+        throw error(status, last_error());
+    }
+}
+
+/// Throws when a range holds fewer than `need` values.
+inline void check_size(std::size_t have, std::size_t need, const char *what) {
+    if (have < need) {
+        throw error(ENVLIGHT_ERROR_INVALID_ARGUMENT,
+                    std::string("envlight: ") + what + " holds " + std::to_string(have) +
+                        " values, " + std::to_string(need) + " needed");
+    }
+}
+
+/// A move-only owner of a C handle freed by `Free`.
+template <typename T, void (*Free)(T *)>
+class handle {
+public:
+    handle() noexcept = default;
+    explicit handle(T *p) noexcept : p_(p) {}
+    handle(const handle &) = delete;
+    handle &operator=(const handle &) = delete;
+    handle(handle &&o) noexcept : p_(std::exchange(o.p_, nullptr)) {}
+    handle &operator=(handle &&o) noexcept {
+        if (this != &o) {
+            Free(p_);
+            p_ = std::exchange(o.p_, nullptr);
+        }
+        return *this;
+    }
+    ~handle() { Free(p_); }
+    T *get() const noexcept { return p_; }
+    explicit operator bool() const noexcept { return p_ != nullptr; }
+
+private:
+    T *p_ = nullptr;
+};
+
+}  // namespace detail
+
+/// The library's version, "MAJOR.MINOR.PATCH".
+inline std::string version() { return envlight_version(); }
+
+/// The default light options (see envlight_light_options).
+inline envlight_light_options default_options() { return envlight_light_options_default(); }
+
+class product;
+class portal_light;
+
+/// An importance-sampled environment light (envlight_light). Queries are const
+/// and thread-safe.
+class light {
+public:
+    /// Reads a map file (.hdr, .exr, .pfm, 8-bit .png/.jpg) and builds the light.
+    static light load(const std::string &path,
+                      const envlight_light_options &options = default_options()) {
+        envlight_light *p = nullptr;
+        detail::check(envlight_light_load(path.c_str(), &options, &p));
+        return light(p);
+    }
+
+    /// Builds a light from `height` rows of `width` RGB texels (row 0 at the top);
+    /// `rgb` holds at least width * height * 3 floats.
+    template <typename R>
+    static light from_rgb(const R &rgb, std::uint32_t width, std::uint32_t height,
+                          const envlight_light_options &options = default_options()) {
+        detail::check_size(static_cast<std::size_t>(rgb.size()),
+                           std::size_t(width) * height * 3, "rgb");
+        envlight_light *p = nullptr;
+        detail::check(envlight_light_from_rgb(rgb.data(), width, height, &options, &p));
+        return light(p);
+    }
+
+    /// A direction for `u` in [0, 1)^2, or nothing (a black map).
+    std::optional<envlight_sample> sample(const std::array<float, 2> &u) const noexcept {
+        envlight_sample s;
+        if (envlight_light_sample(h_.get(), u.data(), &s)) {
+            return s;
+        }
+        return std::nullopt;
+    }
+
+    /// The solid-angle pdf (per steradian) of a unit world direction.
+    float pdf(const std::array<float, 3> &direction) const noexcept {
+        return envlight_light_pdf(h_.get(), direction.data());
+    }
+
+    /// The radiance arriving from a unit world direction (linear RGB).
+    std::array<float, 3> radiance(const std::array<float, 3> &direction) const noexcept {
+        std::array<float, 3> rgb{};
+        envlight_light_radiance(h_.get(), direction.data(), rgb.data());
+        return rgb;
+    }
+
+    /// One sample per point of `u` (2 floats each) into `out` (as many samples);
+    /// a sample with pdf 0 where there is no direction.
+    template <typename U, typename S>
+    void sample(const U &u, S &out) const {
+        const std::size_t n = static_cast<std::size_t>(out.size());
+        detail::check_size(static_cast<std::size_t>(u.size()), 2 * n, "u");
+        detail::check(envlight_light_sample_batch(h_.get(), u.data(), n, out.data()));
+    }
+
+    /// The pdf of each direction of `directions` (3 floats each) into `pdf`.
+    template <typename D, typename P>
+    void pdf(const D &directions, P &pdf) const {
+        const std::size_t n = static_cast<std::size_t>(pdf.size());
+        detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
+        detail::check(envlight_light_pdf_batch(h_.get(), directions.data(), n, pdf.data()));
+    }
+
+    /// The radiance of each direction of `directions` into `rgb` (3 floats each).
+    template <typename D, typename C>
+    void radiance(const D &directions, C &rgb) const {
+        const std::size_t n = static_cast<std::size_t>(rgb.size()) / 3;
+        detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
+        detail::check(envlight_light_radiance_batch(h_.get(), directions.data(), n, rgb.data()));
+    }
+
+    /// The `u` that sampling maps to a direction; nothing for the alias sampler.
+    std::optional<std::array<float, 2>> invert(const std::array<float, 3> &direction) const noexcept {
+        std::array<float, 2> u{};
+        if (envlight_light_invert(h_.get(), direction.data(), u.data())) {
+            return u;
+        }
+        return std::nullopt;
+    }
+
+    /// Sizes, integrals, the brightest direction, memory.
+    envlight_light_info info() const {
+        envlight_light_info i;
+        detail::check(envlight_light_get_info(h_.get(), &i));
+        return i;
+    }
+
+    /// (∫Y dω)² / ∫(Y²/p) dω, by quadrature.
+    double efficiency() const noexcept { return envlight_light_efficiency(h_.get()); }
+
+    /// The light's GPU tables, as envlight_gpu_tables (free with envlight_gpu_tables_free),
+    /// owned by the returned handle.
+    using gpu_tables = detail::handle<envlight_gpu_tables, envlight_gpu_tables_free>;
+    gpu_tables export_gpu_tables(std::uint32_t radiance_format = ENVLIGHT_RADIANCE_F32) const {
+        envlight_gpu_tables *t = nullptr;
+        detail::check(envlight_light_gpu_tables(h_.get(), radiance_format, &t));
+        return gpu_tables(t);
+    }
+
+    /// The C handle, for calls this header does not wrap.
+    const envlight_light *get() const noexcept { return h_.get(); }
+
+private:
+    explicit light(envlight_light *p) noexcept : h_(p) {}
+    detail::handle<envlight_light, envlight_light_free> h_;
+};
+
+/// Product sampling at shading points (envlight_product).
+class product {
+public:
+    explicit product(const light &l) {
+        envlight_product *p = nullptr;
+        detail::check(envlight_product_new(l.get(), &p));
+        h_ = detail::handle<envlight_product, envlight_product_free>(p);
+    }
+
+    std::optional<envlight_sample> sample(const envlight_factor &factor,
+                                          const std::array<float, 2> &u) const noexcept {
+        envlight_sample s;
+        if (envlight_product_sample(h_.get(), &factor, u.data(), &s)) {
+            return s;
+        }
+        return std::nullopt;
+    }
+
+    float pdf(const envlight_factor &factor, const std::array<float, 3> &direction) const noexcept {
+        return envlight_product_pdf(h_.get(), &factor, direction.data());
+    }
+
+    /// One sample per factor of `factors` and point of `u` (2 floats each) into `out`.
+    template <typename F, typename U, typename S>
+    void sample(const F &factors, const U &u, S &out) const {
+        const std::size_t n = static_cast<std::size_t>(out.size());
+        detail::check_size(static_cast<std::size_t>(factors.size()), n, "factors");
+        detail::check_size(static_cast<std::size_t>(u.size()), 2 * n, "u");
+        detail::check(envlight_product_sample_batch(h_.get(), factors.data(), u.data(), n, out.data()));
+    }
+
+    template <typename F, typename D, typename P>
+    void pdf(const F &factors, const D &directions, P &pdf) const {
+        const std::size_t n = static_cast<std::size_t>(pdf.size());
+        detail::check_size(static_cast<std::size_t>(factors.size()), n, "factors");
+        detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
+        detail::check(envlight_product_pdf_batch(h_.get(), factors.data(), directions.data(), n, pdf.data()));
+    }
+
+    const envlight_product *get() const noexcept { return h_.get(); }
+
+private:
+    detail::handle<envlight_product, envlight_product_free> h_;
+};
+
+/// The light seen through portals (envlight_portal_light).
+class portal_light {
+public:
+    /// `corners`: 12 floats per portal (four corners x, y, z in order around it).
+    template <typename C>
+    portal_light(const light &l, const C &corners, std::uint32_t resolution = 0) {
+        envlight_portal_light *p = nullptr;
+        detail::check(envlight_portal_light_new(l.get(), corners.data(),
+                                                static_cast<std::size_t>(corners.size()) / 12,
+                                                resolution, &p));
+        h_ = detail::handle<envlight_portal_light, envlight_portal_light_free>(p);
+    }
+
+    std::optional<envlight_sample> sample(const std::array<float, 3> &point,
+                                          const std::array<float, 2> &u) const noexcept {
+        envlight_sample s;
+        if (envlight_portal_light_sample(h_.get(), point.data(), u.data(), &s)) {
+            return s;
+        }
+        return std::nullopt;
+    }
+
+    float pdf(const std::array<float, 3> &point, const std::array<float, 3> &direction) const noexcept {
+        return envlight_portal_light_pdf(h_.get(), point.data(), direction.data());
+    }
+
+    const envlight_portal_light *get() const noexcept { return h_.get(); }
+
+private:
+    detail::handle<envlight_portal_light, envlight_portal_light_free> h_;
+};
+
+/// The sun of a light and the map without it (envlight_sun_extraction).
+class sun_extraction {
+public:
+    explicit sun_extraction(const light &l) {
+        envlight_sun_extraction *p = nullptr;
+        detail::check(envlight_light_extract_sun(l.get(), &p));
+        h_ = detail::handle<envlight_sun_extraction, envlight_sun_extraction_free>(p);
+    }
+
+    /// The sun, or nothing when the map has none.
+    std::optional<envlight_sun> sun() const noexcept {
+        envlight_sun s;
+        if (envlight_sun_extraction_sun(h_.get(), &s)) {
+            return s;
+        }
+        return std::nullopt;
+    }
+
+    /// The residual image's width and height.
+    std::pair<std::uint32_t, std::uint32_t> residual_size() const noexcept {
+        std::uint32_t w = 0, h = 0;
+        envlight_sun_extraction_residual_size(h_.get(), &w, &h);
+        return {w, h};
+    }
+
+    /// Copies the residual image (width * height * 3 floats) into `rgb`.
+    template <typename C>
+    void residual(C &rgb) const {
+        detail::check(envlight_sun_extraction_residual(h_.get(), rgb.data(),
+                                                       static_cast<std::size_t>(rgb.size())));
+    }
+
+private:
+    detail::handle<envlight_sun_extraction, envlight_sun_extraction_free> h_;
+};
+
+}  // namespace envlight
+
+#endif  // ENVLIGHT_HPP

@@ -1,0 +1,200 @@
+/*
+ * errors: every error path of the C API gives the right status and a message
+ * naming the file, texel or argument; nothing crashes, nothing leaks (this
+ * program runs under valgrind memcheck in tests/c_programs.rs).
+ *
+ *   errors DIR     (a writable directory for a garbage file)
+ * Exit status 0 when every check holds; each failed check prints a line.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "envlight.h"
+
+static int failures = 0;
+
+/* Checks that `status` is `expected` and the last error contains `needle`. */
+static void expect(const char *what, envlight_status status, envlight_status expected,
+                   const char *needle) {
+    char message[1024];
+    size_t len = envlight_last_error(message, sizeof message);
+    if (status != expected) {
+        printf("FAIL %s: status %s, expected %s (%s)\n", what, envlight_status_name(status),
+               envlight_status_name(expected), message);
+        failures++;
+    } else if (needle && !strstr(message, needle)) {
+        printf("FAIL %s: message \"%s\" does not name \"%s\"\n", what, message, needle);
+        failures++;
+    } else if (len != strlen(message) && len < sizeof message) {
+        printf("FAIL %s: envlight_last_error returned %zu for \"%s\"\n", what, len, message);
+        failures++;
+    } else {
+        printf("ok   %s: %s: %s\n", what, envlight_status_name(status), message);
+    }
+}
+
+static void check(const char *what, int ok) {
+    if (!ok) {
+        printf("FAIL %s\n", what);
+        failures++;
+    } else {
+        printf("ok   %s\n", what);
+    }
+}
+
+int main(int argc, char **argv) {
+    envlight_light *light = (envlight_light *)&failures; /* must be reset to NULL */
+    envlight_light_options options = envlight_light_options_default();
+    float rgb[8 * 4 * 3];
+    char path[4096];
+    char tiny[4];
+    size_t k;
+    FILE *f;
+
+    if (argc != 2) {
+        fprintf(stderr, "usage: errors DIR\n");
+        return 2;
+    }
+    for (k = 0; k < sizeof rgb / sizeof rgb[0]; k++) rgb[k] = 0.25f + 0.01f * (float)k;
+
+    /* Before any failure the message is empty. */
+    check("no error yet", envlight_last_error(NULL, 0) == 0);
+
+    /* Files. */
+    expect("missing file",
+           envlight_light_load("/nonexistent/dir/missing.exr", NULL, &light),
+           ENVLIGHT_ERROR_NOT_FOUND, "/nonexistent/dir/missing.exr");
+    check("out is NULL after a failure", light == NULL);
+    snprintf(path, sizeof path, "%s/garbage.exr", argv[1]);
+    f = fopen(path, "wb");
+    if (!f) return 2;
+    fputs("v/1\x01 this is not an OpenEXR file, nor any other map", f);
+    fclose(f);
+    expect("garbage file", envlight_light_load(path, NULL, &light), ENVLIGHT_ERROR_FORMAT,
+           "garbage.exr");
+    snprintf(path, sizeof path, "%s/truncated.hdr", argv[1]);
+    f = fopen(path, "wb");
+    if (!f) return 2;
+    fputs("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n\x01\x02", f);
+    fclose(f);
+    expect("truncated file", envlight_light_load(path, NULL, &light), ENVLIGHT_ERROR_FORMAT,
+           "truncated.hdr");
+    expect("a directory", envlight_light_load(argv[1], NULL, &light), ENVLIGHT_ERROR_IO, argv[1]);
+
+    /* Texels and sizes. */
+    rgb[3 * (2 * 8 + 5) + 1] = NAN;
+    expect("NaN texel", envlight_light_from_rgb(rgb, 8, 4, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_IMAGE, "texel (5, 2)");
+    rgb[3 * (2 * 8 + 5) + 1] = INFINITY;
+    expect("infinite texel", envlight_light_from_rgb(rgb, 8, 4, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_IMAGE, "texel (5, 2)");
+    rgb[3 * (2 * 8 + 5) + 1] = -1.0f;
+    expect("negative texel", envlight_light_from_rgb(rgb, 8, 4, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_IMAGE, "texel (5, 2)");
+    rgb[3 * (2 * 8 + 5) + 1] = 0.5f;
+    expect("zero width", envlight_light_from_rgb(rgb, 0, 4, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "width");
+    expect("zero height", envlight_light_from_rgb(rgb, 8, 0, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "height");
+    expect("huge size", envlight_light_from_rgb(rgb, 0xffffffffu, 0xffffffffu, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "too large");
+
+    /* NULL arguments. */
+    expect("NULL path", envlight_light_load(NULL, NULL, &light), ENVLIGHT_ERROR_INVALID_ARGUMENT,
+           "path");
+    expect("NULL out", envlight_light_load("x.exr", NULL, NULL), ENVLIGHT_ERROR_INVALID_ARGUMENT,
+           "out");
+    expect("NULL rgb", envlight_light_from_rgb(NULL, 8, 4, NULL, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "rgb");
+
+    /* Options. */
+    options.sampler = 7;
+    expect("bad sampler", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.sampler");
+    options = envlight_light_options_default();
+    options.scale = -1.0f;
+    expect("negative scale", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.scale");
+    options = envlight_light_options_default();
+    options.table_width = 3;
+    expect("table width that does not divide", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "3");
+    options = envlight_light_options_default();
+    options.density = ENVLIGHT_DENSITY_PIECEWISE_BILINEAR;
+    options.sampler = ENVLIGHT_SAMPLER_ALIAS;
+    expect("bilinear density with alias", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "alias");
+
+    /* A good light, then bad queries on it. */
+    options = envlight_light_options_default();
+    expect("good light", envlight_light_from_rgb(rgb, 8, 4, &options, &light), ENVLIGHT_OK, NULL);
+    {
+        envlight_sample s;
+        float u[2] = {0.5f, 0.5f}, d[3] = {0.0f, 0.0f, 1.0f}, l[3];
+        float pdf[4];
+        envlight_product *product = NULL;
+        envlight_gpu_tables *tables = NULL;
+        envlight_sun_extraction *sun = NULL;
+        envlight_portal_light *portal = NULL;
+        float flat[12] = {0};
+        size_t words = 1;
+
+        check("sample NULL light is false", !envlight_light_sample(NULL, u, &s) && s.pdf == 0.0f);
+        expect("sample NULL light message", ENVLIGHT_ERROR_INVALID_ARGUMENT,
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "light is NULL");
+        check("sample NULL u is false", !envlight_light_sample(light, NULL, &s));
+        check("sample NULL out is false", !envlight_light_sample(light, u, NULL));
+        check("pdf NULL direction is 0", envlight_light_pdf(light, NULL) == 0.0f);
+        envlight_light_radiance(light, NULL, l);
+        check("radiance NULL direction is black", l[0] == 0.0f && l[1] == 0.0f && l[2] == 0.0f);
+        envlight_light_radiance(light, d, NULL);
+        check("a good sample", envlight_light_sample(light, u, &s) && s.pdf > 0.0f);
+        expect("batch NULL directions", envlight_light_pdf_batch(light, NULL, 4, pdf),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "directions");
+        expect("batch NULL out", envlight_light_sample_batch(light, u, 1, NULL),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "out");
+        expect("batch NULL light", envlight_light_radiance_batch(NULL, d, 1, l),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "light");
+        expect("batch of 0", envlight_light_pdf_batch(light, NULL, 0, NULL), ENVLIGHT_OK, NULL);
+        expect("product NULL light", envlight_product_new(NULL, &product),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "light");
+        expect("portal: a flat quad", envlight_portal_light_new(light, flat, 1, 0, &portal),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "portal 0");
+        expect("portal: none", envlight_portal_light_new(light, flat, 0, 0, &portal),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "count");
+        expect("gpu tables: bad format", envlight_light_gpu_tables(light, 9, &tables),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "radiance_format");
+        check("gpu buffer of NULL", envlight_gpu_tables_buffer(NULL, 0, &words) == NULL && words == 0);
+        expect("sun: NULL out", envlight_light_extract_sun(light, NULL),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "out");
+        expect("sun", envlight_light_extract_sun(light, &sun), ENVLIGHT_OK, NULL);
+        expect("residual too small", envlight_sun_extraction_residual(sun, rgb, 5),
+               ENVLIGHT_ERROR_INVALID_ARGUMENT, "len");
+        envlight_sun_extraction_free(sun);
+        options.sampler = ENVLIGHT_SAMPLER_HIERARCHICAL;
+        envlight_light_free(light);
+        expect("hierarchical light", envlight_light_from_rgb(rgb, 8, 4, &options, &light), ENVLIGHT_OK,
+               NULL);
+        expect("gpu tables: hierarchical", envlight_light_gpu_tables(light, 0, &tables),
+               ENVLIGHT_ERROR_UNSUPPORTED, "hierarchical");
+    }
+
+    /* The message is truncated to the buffer, and the length is the whole one. */
+    {
+        size_t whole = envlight_last_error(NULL, 0);
+        size_t got = envlight_last_error(tiny, sizeof tiny);
+        check("truncated message", got == whole && strlen(tiny) == sizeof tiny - 1);
+    }
+
+    envlight_light_free(light);
+    envlight_light_free(NULL);
+    envlight_product_free(NULL);
+    envlight_portal_light_free(NULL);
+    envlight_sun_extraction_free(NULL);
+    envlight_gpu_tables_free(NULL);
+    check("version", strcmp(envlight_version(), "0.1.0") >= 0 && ENVLIGHT_VERSION_MAJOR == 0);
+    printf("%d failures\n", failures);
+    return failures == 0 ? 0 : 1;
+}
