@@ -497,3 +497,39 @@ fn shared_library_exports_only_envlight_symbols() {
         "{soname}"
     );
 }
+
+/// README's C example, as a newcomer would build it: through pkg-config, shared
+/// and static, on the built-in pixels and on a map file.
+#[test]
+fn readme_example_builds_and_runs() {
+    let Some(b) = programs() else { return };
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
+            .expect("README.md");
+    let section = &readme[readme
+        .find("## C and C++")
+        .expect("README has a C and C++ section")..];
+    let start = section.find("```c\n").expect("a C block") + 5;
+    let code = &section[start..start + section[start..].find("```").unwrap()];
+    let source = b.work.path().join("example.c");
+    std::fs::write(&source, code).unwrap();
+    let maps: Vec<String> = real().map(|m| m.arg).into_iter().collect();
+    for package in ["envlight", "envlight-static"] {
+        let flags = run(Command::new("pkg-config")
+            .args(["--cflags", "--libs", package])
+            .env("PKG_CONFIG_PATH", b.prefix.join("lib/pkgconfig")));
+        let exe = b.work.path().join(format!("example-{package}"));
+        run(Command::new("cc")
+            .args(["-std=c11", "-Wall", "-Wextra", "-Werror"])
+            .arg(&source)
+            .args(flags.split_whitespace())
+            .arg("-o")
+            .arg(&exe));
+        let out = run(&mut Command::new(&exe));
+        assert!(out.starts_with("pdf "), "{out}");
+        for map in &maps {
+            let out = run(Command::new(&exe).arg(map));
+            assert!(out.starts_with("pdf "), "{out}");
+        }
+    }
+}
