@@ -27,6 +27,16 @@
 //! let e = e / n as f32;
 //! assert!(e > 0.0 && e.is_finite());
 //! ```
+//!
+//! # Optional features
+//!
+//! Off by default; each adds conversions of [`Vec3`] (and [`Rotation`]) to and from
+//! another math crate's types, copying the components as they are:
+//!
+//! - `mint`: `Vec3` ⇄ `mint::Vector3<f32>`; `Rotation` → `mint::RowMatrix3<f32>`
+//!   (the rows of [`Rotation::rows`]), and back through `TryFrom`, which rejects a
+//!   matrix that is not a rotation as [`Rotation::from_rows`] does.
+//! - `glam`: `Vec3` ⇄ `glam::Vec3`.
 #![warn(missing_docs)]
 
 pub mod alias;
@@ -39,6 +49,8 @@ pub mod error;
 pub mod gpu;
 pub mod hierarchical;
 pub mod image;
+#[cfg(any(feature = "mint", feature = "glam"))]
+mod interop;
 pub mod light;
 pub mod load;
 pub mod mapping;
