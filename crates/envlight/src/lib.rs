@@ -69,6 +69,13 @@ pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoi
 pub use sun::{Sun, SunExtraction, SunOptions};
 
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
-#[doc = include_str!("../../../README.md")]
+/// `repository-README.md` is a link to the repository's README.md, which the
+/// package holds as a copy: the doctests run from the package too.
+#[doc = include_str!("../repository-README.md")]
 #[cfg(doctest)]
 pub struct ReadmeDoctests;
+
+/// The crate's own README (its page on crates.io), compiled and run as a doctest.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct CrateReadmeDoctests;
