@@ -970,6 +970,21 @@ fn decode_exr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     let selection = select_exr_layer(reader.headers()).map_err(|d| ctx.decode_error(d))?;
     let part = selection.part;
     let header = reader.headers()[part].clone();
+    // The exr crate's DWA decoder (1.74) takes counts from a chunk's header as
+    // allocation sizes without bounding them: a malformed chunk of a few bytes
+    // aborts the process ("memory allocation of 8796093022560 bytes failed"),
+    // which no caller can catch (found by fuzzing). Refused until it checks them.
+    let dwa = match header.compression {
+        exr::compression::Compression::DWAA(_) => Some("DWAA"),
+        exr::compression::Compression::DWAB(_) => Some("DWAB"),
+        _ => None,
+    };
+    if let Some(name) = dwa {
+        return Err(ctx.decode_error(format!(
+            "{name} compression is not supported (its decoder can abort on malformed \
+             data); re-save the map with ZIP or PIZ compression"
+        )));
+    }
     let (width, height) = (header.layer_size.0, header.layer_size.1);
     let n = ctx.check_dimensions(width, height)?;
     let mut notes = selection.notes;

@@ -1258,3 +1258,22 @@ fn truncated_real_maps_are_errors_not_panics() {
         }
     }
 }
+
+/// DWAA/DWAB-compressed EXR is refused with a message saying why and what to do:
+/// the exr crate's DWA decoder can abort the process on a malformed chunk (a
+/// fuzzing find, kept in fuzz/regressions/load/), which no caller could catch.
+#[test]
+fn dwa_compressed_exr_is_refused_not_decoded() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/regressions/load/exr-dwa-ac-count.exr");
+    let bytes = std::fs::read(&path).unwrap();
+    let e = expect_err(load_from_memory("dwa.exr", &bytes, &opts()), "DWA");
+    let message = e.to_string();
+    assert!(matches!(e, Error::Decode { .. }), "{message}");
+    assert!(
+        message.starts_with("dwa.exr: ")
+            && message.contains("DWAA compression is not supported")
+            && message.contains("ZIP or PIZ"),
+        "{message}"
+    );
+}
