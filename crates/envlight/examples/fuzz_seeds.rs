@@ -558,10 +558,11 @@ fn exr_seeds() -> Result<Vec<Seed>, Box<dyn Error>> {
         ("zip", Compression::ZIP16, [true, true]),
         ("piz", Compression::PIZ, [true, true]),
         ("pxr24", Compression::PXR24, [true, true]),
-        // B44 compresses f16 channels only. DWAA/DWAB are left out: the loader
-        // refuses them (the exr crate's DWA decoder can abort on malformed data).
+        // B44 and DWA compress f16 channels only.
         ("b44", Compression::B44, [false, true]),
         ("b44a", Compression::B44A, [false, true]),
+        ("dwaa", Compression::DWAA(None), [false, true]),
+        ("dwab", Compression::DWAB(None), [false, true]),
     ];
     for half in [false, true] {
         let ty = if half { "f16" } else { "f32" };

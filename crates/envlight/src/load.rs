@@ -957,6 +957,52 @@ fn exr_detail(error: exr::error::Error) -> String {
     }
 }
 
+/// Bounds the sizes a DWAA/DWAB chunk's leader declares before the exr crate
+/// (1.74) decodes it: its decoder takes them as allocation sizes unchecked, and a
+/// malformed chunk of a few bytes (a fuzzing find, kept in
+/// `fuzz/regressions/load/`) asks for terabytes, which aborts the process; no
+/// caller could catch that. The leader is eleven little-endian u64 counters
+/// (version; unknown uncompressed and compressed sizes; AC, DC, RLE compressed
+/// sizes; RLE uncompressed and raw sizes; AC and DC value counts; AC coder). No
+/// section of a valid chunk decodes to more than the block's bytes, nor holds more
+/// values than the block has samples (each at least 2 bytes), so anything larger
+/// is refused as corrupt. A chunk stored raw (its size the block's) or empty has no
+/// leader.
+fn check_dwa_chunk(chunk: &exr::block::chunk::Chunk, block_bytes: usize) -> Result<(), String> {
+    use exr::block::chunk::CompressedBlock;
+    let data = match &chunk.compressed_block {
+        CompressedBlock::ScanLine(b) => &b.compressed_pixels_le,
+        CompressedBlock::Tile(b) => &b.compressed_pixels_le,
+        // Deep data is refused later, with its own message.
+        _ => return Ok(()),
+    };
+    if data.is_empty() || data.len() == block_bytes || data.len() < 88 {
+        return Ok(());
+    }
+    let counter = |k: usize| {
+        let bytes: [u8; 8] = data[8 * k..8 * k + 8].try_into().unwrap_or([0xff; 8]);
+        u64::from_le_bytes(bytes)
+    };
+    let limit = block_bytes as u64;
+    // Sizes of decoded sections (unknown, RLE uncompressed and raw) and value
+    // counts (AC, DC: 2 bytes each).
+    for (k, name, max) in [
+        (1, "unknown section size", limit),
+        (6, "RLE section size", limit),
+        (7, "RLE raw size", limit),
+        (8, "AC value count", limit / 2 + 64),
+        (9, "DC value count", limit / 2 + 64),
+    ] {
+        let value = counter(k);
+        if value > max {
+            return Err(format!(
+                "corrupt DWA chunk: its {name} is {value}, more than its block of {block_bytes} bytes can hold"
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn decode_exr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     use exr::block::reader::ChunksReader;
     use exr::block::UncompressedBlock;
@@ -970,21 +1016,10 @@ fn decode_exr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     let selection = select_exr_layer(reader.headers()).map_err(|d| ctx.decode_error(d))?;
     let part = selection.part;
     let header = reader.headers()[part].clone();
-    // The exr crate's DWA decoder (1.74) takes counts from a chunk's header as
-    // allocation sizes without bounding them: a malformed chunk of a few bytes
-    // aborts the process ("memory allocation of 8796093022560 bytes failed"),
-    // which no caller can catch (found by fuzzing). Refused until it checks them.
-    let dwa = match header.compression {
-        exr::compression::Compression::DWAA(_) => Some("DWAA"),
-        exr::compression::Compression::DWAB(_) => Some("DWAB"),
-        _ => None,
-    };
-    if let Some(name) = dwa {
-        return Err(ctx.decode_error(format!(
-            "{name} compression is not supported (its decoder can abort on malformed \
-             data); re-save the map with ZIP or PIZ compression"
-        )));
-    }
+    let dwa = matches!(
+        header.compression,
+        exr::compression::Compression::DWAA(_) | exr::compression::Compression::DWAB(_)
+    );
     let (width, height) = (header.layer_size.0, header.layer_size.1);
     let n = ctx.check_dimensions(width, height)?;
     let mut notes = selection.notes;
@@ -1017,7 +1052,12 @@ fn decode_exr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     loop {
         let mut batch = Vec::with_capacity(batch_size);
         for chunk in chunks.by_ref().take(batch_size) {
-            batch.push(chunk.map_err(exr_error)?);
+            let chunk = chunk.map_err(exr_error)?;
+            if dwa {
+                check_dwa_chunk(&chunk, header.max_block_byte_size())
+                    .map_err(|d| ctx.decode_error(d))?;
+            }
+            batch.push(chunk);
         }
         if batch.is_empty() {
             break;
