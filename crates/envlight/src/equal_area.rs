@@ -47,7 +47,7 @@
 //! mapping is continuous across these folds on the sphere.
 
 use crate::image::{EnvImage, Lookup};
-use crate::math::Vec3;
+use crate::math::{atan2_pi, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::{FRAC_PI_2, PI};
 
@@ -85,26 +85,48 @@ pub fn square_to_sphere(u: f32, v: f32) -> Vec3 {
 
 /// The square point `[u, v] ∈ [0, 1]²` looking along `d` (normalised here; a zero
 /// or non-finite `d` gives the centre, +z). On the square's folded boundary one of
-/// the two equivalent points is returned.
-#[inline]
+/// the two equivalent points is returned. All in f32 with the angle of
+/// [`crate::math::atan2_pi`] and no branch, so [`spheres_to_square`] computes the
+/// same values in vector lanes.
+#[inline(always)]
 pub fn sphere_to_square(d: Vec3) -> [f32; 2] {
-    let Some(d) = d.normalized() else {
-        return [0.5, 0.5];
-    };
-    unit_sphere_to_square(d, f32::atan2)
+    let len = d.length();
+    let valid = len > 0.0 && len.is_finite();
+    // The normalisation of `Vec3::normalized`, applied to a harmless vector when
+    // `d` is invalid so that the lanes version needs no branch.
+    let inv = 1.0 / if valid { len } else { 1.0 };
+    let unit = d * inv;
+    let [u, v] = unit_sphere_to_square(unit);
+    if valid {
+        [u, v]
+    } else {
+        [0.5, 0.5]
+    }
 }
 
-/// [`sphere_to_square`] of the unit `d`, with `atan2(y, x)` as given.
+/// [`sphere_to_square`] of `N` directions (`x[i], y[i], z[i]`), as a loop the
+/// compiler vectorizes: bit for bit the single calls.
 #[inline(always)]
-fn unit_sphere_to_square(d: Vec3, atan2: impl Fn(f32, f32) -> f32) -> [f32; 2] {
+pub(crate) fn spheres_to_square<const N: usize>(
+    x: &[f32; N],
+    y: &[f32; N],
+    z: &[f32; N],
+) -> ([f32; N], [f32; N]) {
+    let (mut u, mut v) = ([0.0f32; N], [0.0f32; N]);
+    for i in 0..N {
+        [u[i], v[i]] = sphere_to_square(Vec3::new(x[i], y[i], z[i]));
+    }
+    (u, v)
+}
+
+/// [`sphere_to_square`] of the unit `d`.
+#[inline(always)]
+fn unit_sphere_to_square(d: Vec3) -> [f32; 2] {
     let (x, y, z) = (d.x.abs(), d.y.abs(), d.z.abs());
     // 1 - |z| = (x² + y²)/(1 + |z|) for a unit vector, without cancellation.
     let r = ((x * x + y * y) / (1.0 + z)).sqrt().min(1.0);
-    let phi_fraction = if x > 0.0 || y > 0.0 {
-        (atan2(y, x) * (1.0 / FRAC_PI_2)).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    // 2 atan2(y, x)/π: 0 on the x axis (and for x = y = 0), 1 on the y axis.
+    let phi_fraction = (2.0 * atan2_pi(y, x)).clamp(0.0, 1.0);
     let abs_b = r * phi_fraction;
     let abs_a = r - abs_b;
     let (abs_a, abs_b) = if d.z < 0.0 {

@@ -9,7 +9,7 @@
 //! So the top row looks at +z, `u = 0` at +x and `u = 0.25` at +y.
 
 use crate::distribution::ONE_MINUS_EPSILON;
-use crate::math::{atan2_pair, sin_cos_pi, Vec3};
+use crate::math::{atan2_pi_lanes, atan2_pi_pair, sin_cos_pi, Vec3};
 use std::f32::consts::PI;
 
 /// `dω / (du dv) = 2π² sin θ`: this constant times `sin θ`.
@@ -28,11 +28,15 @@ pub fn equirect_to_direction(u: f32, v: f32) -> (Vec3, f32) {
 }
 
 /// The image point `[u, v] ∈ [0, 1)×[0, 1]` looking along the unit direction `d`:
-/// `θ = acos(z)`, `φ = atan2(y, x)` wrapped to `[0, 2π)`.
+/// `v = θ/π = atan2(√(x² + y²), z)/π`, `u = φ/2π` with `φ = atan2(y, x)` wrapped to
+/// `[0, 2π)`, in f32 ([`crate::math::atan2_pi`]: within 3·10⁻⁸ of the exact value, and with full
+/// relative precision next to the poles, where `acos` of an f32 `z` would be good
+/// to only about 3·10⁻⁴ rad).
 ///
-/// θ is computed as `atan2(√(x² + y²), z)`, which equals `acos(z)` for unit vectors
-/// but keeps full precision near the poles, where `acos` of an f32 `z` is only good
-/// to about 3·10⁻⁴ rad (a twentieth of a texel on a 512-row map).
+/// The round trip image point → direction → image point is therefore good to a
+/// few 10⁻⁸, not exact: a point drawn within that distance of a cell's edge can
+/// come back in the neighbour cell. The light's sampling settles such points
+/// inside their cell (`EnvironmentLight::sample`).
 #[inline(always)]
 pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
     direction_to_equirect_and_csc(d).0
@@ -45,28 +49,39 @@ pub fn direction_to_equirect(d: Vec3) -> [f32; 2] {
 /// Jacobian becomes a multiplication at the end of the query's critical path.
 #[inline(always)]
 pub fn direction_to_equirect_and_csc(d: Vec3) -> ([f32; 2], f32) {
-    use std::f64::consts::PI;
+    let (r, csc_theta) = radius_and_csc(d);
+    let [v, half_turns] = atan2_pi_pair([r, d.y], [d.z, d.x]);
+    ([u_of_half_turns(half_turns), v], csc_theta)
+}
+
+/// `√(x² + y²)` and `1 / sin θ = |d| / √(x² + y²)` of `d`, as
+/// [`direction_to_equirect_and_csc`] computes them (bit for bit).
+#[inline(always)]
+pub(crate) fn radius_and_csc(d: Vec3) -> (f32, f32) {
     let r2 = d.x * d.x + d.y * d.y;
     let r = r2.sqrt();
-    // Both angles at once, in f64, each rounded once into the image coordinate.
-    let [theta, phi] = atan2_pair([r, d.y], [d.z, d.x]);
-    let phi = if phi < 0.0 { phi + 2.0 * PI } else { phi };
-    let u = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
-    let csc_theta = (r2 + d.z * d.z).sqrt() / r;
-    ([u, (theta * (1.0 / PI)) as f32], csc_theta)
+    (r, (r2 + d.z * d.z).sqrt() / r)
+}
+
+/// `u = φ / 2π` in `[0, 1)` from `φ / π` in `[-1, 1]`.
+#[inline(always)]
+fn u_of_half_turns(half_turns: f32) -> f32 {
+    let u = 0.5 * half_turns;
+    let u = if half_turns < 0.0 { u + 1.0 } else { u };
+    u.min(ONE_MINUS_EPSILON)
 }
 
 /// [`direction_to_equirect_and_csc`] for `N` directions given by their
 /// coordinates (`x[i], y[i], z[i]`), as loops over the lanes that the compiler
-/// vectorizes: the same operations in the same order, so bit for bit the same
-/// values. Returns the `u`, `v` and `1 / sin θ` of each.
+/// vectorizes (16 lanes of f32 with AVX-512): the same operations in the same
+/// order, so bit for bit the same values. Returns the `u`, `v` and `1 / sin θ` of
+/// each.
 #[inline(always)]
 pub(crate) fn directions_to_equirect_and_csc<const N: usize>(
     x: &[f32; N],
     y: &[f32; N],
     z: &[f32; N],
 ) -> ([f32; N], [f32; N], [f32; N]) {
-    use std::f64::consts::PI;
     let mut r = [0.0f32; N];
     let mut csc = [0.0f32; N];
     for i in 0..N {
@@ -74,21 +89,10 @@ pub(crate) fn directions_to_equirect_and_csc<const N: usize>(
         r[i] = r2.sqrt();
         csc[i] = (r2 + z[i] * z[i]).sqrt() / r[i];
     }
-    let (mut r64, mut z64, mut y64, mut x64) = ([0.0f64; N], [0.0f64; N], [0.0f64; N], [0.0f64; N]);
-    for i in 0..N {
-        (r64[i], z64[i], y64[i], x64[i]) = (r[i] as f64, z[i] as f64, y[i] as f64, x[i] as f64);
-    }
-    let theta = crate::math::atan2_lanes(&r64, &z64);
-    let phi = crate::math::atan2_lanes(&y64, &x64);
-    let (mut u, mut v) = ([0.0f32; N], [0.0f32; N]);
-    for i in 0..N {
-        let phi = if phi[i] < 0.0 {
-            phi[i] + 2.0 * PI
-        } else {
-            phi[i]
-        };
-        u[i] = ((phi * (0.5 / PI)) as f32).min(ONE_MINUS_EPSILON);
-        v[i] = (theta[i] * (1.0 / PI)) as f32;
+    let v = atan2_pi_lanes(&r, z);
+    let mut u = atan2_pi_lanes(y, x);
+    for u in &mut u {
+        *u = u_of_half_turns(*u);
     }
     (u, v, csc)
 }

@@ -96,9 +96,46 @@ impl EnvironmentLight {
             if let Some(d) = continuous {
                 self.finish_continuous_block(d, planar, out);
             } else {
-                for (o, &p) in out.iter_mut().zip(planar.iter()) {
-                    *o = self.finish_sample(p, false);
-                }
+                self.finish_constant_block(planar, out);
+            }
+        }
+    }
+
+    /// [`Self::finish_sample`] of a block of samples of a piecewise-constant
+    /// density: the directions first, then their image points and Jacobians
+    /// together in vector lanes ([`Self::to_uv_block`], bit for bit the single
+    /// query's), then each sample's check that it came back to its cell.
+    #[inline(always)]
+    fn finish_constant_block(&self, planar: &[Sample2D], out: &mut [Option<LightSample>]) {
+        for (planar, out) in planar.chunks(QUERY_BLOCK).zip(out.chunks_mut(QUERY_BLOCK)) {
+            let mut directions = [Vec3::new(0.0, 0.0, 1.0); QUERY_BLOCK];
+            let mut xyz = [
+                [0.0f32; QUERY_BLOCK],
+                [0.0; QUERY_BLOCK],
+                [1.0; QUERY_BLOCK],
+            ];
+            let mut all_clear = true;
+            for (i, p) in planar.iter().enumerate() {
+                let d = self.uv_to_direction(p.uv);
+                directions[i] = d;
+                (xyz[0][i], xyz[1][i], xyz[2][i]) = (d.x, d.y, d.z);
+                all_clear &= p.pdf == 0.0 || self.clear_of_edges(p);
+            }
+            // Points next to an edge (a few per block on a fine table) are mapped
+            // back together, in vector lanes.
+            let back = (!all_clear).then(|| {
+                let [x, y, z] = xyz;
+                self.to_uv_block(x, y, z)
+            });
+            for (i, (o, &p)) in out.iter_mut().zip(planar).enumerate() {
+                *o = match &back {
+                    _ if p.pdf == 0.0 => None,
+                    Some(back) if !self.clear_of_edges(&p) => {
+                        let uv = [back.u[i], back.v[i]];
+                        self.finish_constant(p, directions[i], uv, back.inv_jacobian[i])
+                    }
+                    _ => self.finish_clear(p, directions[i]),
+                };
             }
         }
     }
@@ -368,10 +405,7 @@ impl EnvironmentLight {
                 UvBlock { u, v, inv_jacobian }
             }
             Mapping::EqualArea => {
-                let (mut u, mut v) = ([0.0f32; QUERY_BLOCK], [0.0f32; QUERY_BLOCK]);
-                for i in 0..QUERY_BLOCK {
-                    [u[i], v[i]] = equal_area::sphere_to_square(Vec3::new(x[i], y[i], z[i]));
-                }
+                let (u, v) = equal_area::spheres_to_square(&x, &y, &z);
                 UvBlock {
                     u,
                     v,

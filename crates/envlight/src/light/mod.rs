@@ -31,11 +31,13 @@ mod efficiency;
 
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
-use crate::distribution::{Distribution2D, Sample2D};
+use crate::distribution::{cell_index, Distribution2D, Sample2D};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::hierarchical::Hierarchical2D;
 use crate::image::{EnvImage, Lookup, WrapU};
-use crate::mapping::{direction_to_equirect_and_csc, equirect_to_direction, EQUIRECT_JACOBIAN};
+use crate::mapping::{
+    direction_to_equirect_and_csc, equirect_to_direction, radius_and_csc, EQUIRECT_JACOBIAN,
+};
 use crate::math::{is_positive_finite, Rotation, Vec3};
 use build::{importance_row, LuminanceRows};
 use std::f64::consts::PI;
@@ -152,6 +154,16 @@ impl Mapping {
         }
     }
 
+    /// `du dv / dω` at the light-frame direction `d`, bit for bit the second value
+    /// of [`Self::to_uv`], without the angles.
+    #[inline(always)]
+    fn inv_jacobian(self, d: Vec3) -> f32 {
+        match self {
+            Mapping::Equirectangular => radius_and_csc(d).1 * (1.0 / EQUIRECT_JACOBIAN),
+            Mapping::EqualArea => 1.0 / EQUAL_AREA_JACOBIAN,
+        }
+    }
+
     /// The mapping's area factor `J` at image height `v`, relative to its maximum
     /// (`sin θ` for lat-long, 1 for equal-area): what importance is multiplied by.
     fn area_factor(self, v: f64) -> f64 {
@@ -237,6 +249,13 @@ pub struct LightSample {
     pub uv: [f32; 2],
 }
 
+/// How far inside its cell (in image coordinates) a sampled point must lie for
+/// its direction to be sure to map back into the cell without the check: 30
+/// times the f32 round trip's error (point → direction through `sin_cos_pi`,
+/// back through `atan2_pi`: a few 10⁻⁸; `round_trip_stays_within_its_margin`
+/// measures it). Points nearer an edge are mapped back and settled.
+const ROUND_TRIP_MARGIN: f32 = 2e-6;
+
 /// The 2D sampler over `[0, 1]²` behind a light.
 #[derive(Debug, Clone)]
 pub(crate) enum Planar {
@@ -248,7 +267,6 @@ pub(crate) enum Planar {
 
 impl Planar {
     /// The planar density at `uv` (the light's queries inline each sampler's own).
-    #[cfg(test)]
     fn pdf(&self, uv: [f32; 2]) -> f32 {
         match self {
             Planar::Inversion(d) => d.pdf(uv),
@@ -421,32 +439,145 @@ impl EnvironmentLight {
         }
     }
 
-    /// The direction, pdf and radiance of the planar sample `s`. A continuous density
-    /// changes across the f32 rounding of the direction (by up to ~1e-3 relative
-    /// next to a bright texel), so its pdf is evaluated where the caller will
-    /// evaluate it: at the returned direction, bit for bit what [`Self::pdf`] gives.
-    /// A piecewise-constant density is exact at `s.uv`.
+    /// The direction, pdf and radiance of the planar sample `s`, each what
+    /// [`Self::pdf`] and [`Self::radiance`] give at the returned direction, bit for
+    /// bit.
+    ///
+    /// A continuous density changes across the f32 rounding of the direction (by
+    /// up to ~1e-3 relative next to a bright texel), so its pdf is evaluated at
+    /// the returned direction. A piecewise-constant density is constant in the
+    /// cell, but the f32 round trip point → direction → point (a few 10⁻⁸ of the
+    /// image) can carry a point drawn next to the cell's edge into the neighbour,
+    /// whose density may differ by any factor: the point is settled in its cell
+    /// first ([`Self::settle`]), then the pdf is the cell's density over the
+    /// Jacobian read off the direction, and the radiance is looked up where the
+    /// direction points.
     #[inline(always)]
     fn finish_sample(&self, s: Sample2D, continuous_density: bool) -> Option<LightSample> {
         if s.pdf == 0.0 {
             return None;
         }
-        let (local, jacobian) = self.options.mapping.to_direction(s.uv);
-        let direction = self.to_world(local);
-        let pdf = if continuous_density {
-            self.pdf(direction)
-        } else {
-            s.pdf / jacobian
-        };
-        if !(jacobian > 0.0 && is_positive_finite(pdf)) {
-            return None;
+        if continuous_density {
+            let (local, jacobian) = self.options.mapping.to_direction(s.uv);
+            let direction = self.to_world(local);
+            let pdf = self.pdf(direction);
+            if !(jacobian > 0.0 && is_positive_finite(pdf)) {
+                return None;
+            }
+            return Some(LightSample {
+                direction,
+                pdf,
+                radiance: self.lookup(s.uv),
+                uv: s.uv,
+            });
         }
-        Some(LightSample {
+        let direction = self.uv_to_direction(s.uv);
+        if self.clear_of_edges(&s) {
+            return self.finish_clear(s, direction);
+        }
+        let (back, inv_jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+        self.finish_constant(s, direction, back, inv_jacobian)
+    }
+
+    /// Whether the point of `s` lies at least [`ROUND_TRIP_MARGIN`] inside its
+    /// cell on every side, where its direction is sure to map back into the cell.
+    #[inline(always)]
+    fn clear_of_edges(&self, s: &Sample2D) -> bool {
+        let [nu, nv] = self.table_size();
+        let inside = |x: f32, cell: usize, n: usize| {
+            let n = n as f32;
+            let (lo, hi) = (cell as f32 / n, (cell + 1) as f32 / n);
+            x - lo >= ROUND_TRIP_MARGIN && hi - x >= ROUND_TRIP_MARGIN
+        };
+        inside(s.uv[0], s.cell[0], nu) && inside(s.uv[1], s.cell[1], nv)
+    }
+
+    /// The sample of a piecewise-constant density at a point clear of its cell's
+    /// edges: the cell's density over the Jacobian read off the direction (what
+    /// [`Self::pdf`] computes there, bit for bit, since the direction maps back
+    /// into the cell), and the radiance at the drawn point.
+    #[inline(always)]
+    fn finish_clear(&self, s: Sample2D, direction: Vec3) -> Option<LightSample> {
+        let inv_jacobian = self.options.mapping.inv_jacobian(self.to_light(direction));
+        let pdf = solid_angle(s.pdf, inv_jacobian);
+        is_positive_finite(pdf).then(|| LightSample {
             direction,
             pdf,
             radiance: self.lookup(s.uv),
             uv: s.uv,
         })
+    }
+
+    /// The sample of a piecewise-constant density drawn at `s`, given the direction
+    /// of `s.uv` and that direction's image point `back` and reciprocal Jacobian
+    /// (the batch computes those for a block at once).
+    #[inline(always)]
+    fn finish_constant(
+        &self,
+        s: Sample2D,
+        direction: Vec3,
+        back: [f32; 2],
+        inv_jacobian: f32,
+    ) -> Option<LightSample> {
+        let (uv, direction, back, inv_jacobian, planar) = if self.cell_of(back) == s.cell {
+            (s.uv, direction, back, inv_jacobian, s.pdf)
+        } else {
+            self.settle(s)
+        };
+        let pdf = solid_angle(planar, inv_jacobian);
+        if !is_positive_finite(pdf) {
+            return None;
+        }
+        Some(LightSample {
+            direction,
+            pdf,
+            radiance: self.lookup(back),
+            uv,
+        })
+    }
+
+    /// The table cell holding the image point `uv`, as the densities find it.
+    #[inline(always)]
+    fn cell_of(&self, uv: [f32; 2]) -> [usize; 2] {
+        let [nu, nv] = self.table_size();
+        [cell_index(uv[0], nu), cell_index(uv[1], nv)]
+    }
+
+    /// Moves the point of `s`, whose direction maps back into a neighbouring cell,
+    /// towards its cell's centre (by 0.1% of the way, then four times further each
+    /// try, reaching the centre at the sixth) until its direction maps back into
+    /// the cell: the density is constant there, and only a band of a few 10⁻⁸ of
+    /// the image along the cell's edges is squeezed inward. Returns the point, its
+    /// direction, that direction's image point and reciprocal Jacobian, and the
+    /// planar density there (the cell's; should the direction still land
+    /// elsewhere, as no case in the tests does, the density where it lands, so the
+    /// pdf stays that of the returned direction).
+    #[cold]
+    #[inline(never)]
+    fn settle(&self, s: Sample2D) -> ([f32; 2], Vec3, [f32; 2], f32, f32) {
+        let [nu, nv] = self.table_size();
+        let centre = [
+            (s.cell[0] as f32 + 0.5) / nu as f32,
+            (s.cell[1] as f32 + 0.5) / nv as f32,
+        ];
+        let (mut uv, mut step) = (s.uv, 1e-3f32);
+        let mut tries = 0;
+        loop {
+            uv = [
+                uv[0] + (centre[0] - uv[0]) * step,
+                uv[1] + (centre[1] - uv[1]) * step,
+            ];
+            step = (4.0 * step).min(1.0);
+            tries += 1;
+            let direction = self.uv_to_direction(uv);
+            let (back, inv_jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+            if self.cell_of(back) == s.cell {
+                return (uv, direction, back, inv_jacobian, s.pdf);
+            }
+            if tries == 6 {
+                return (uv, direction, back, inv_jacobian, self.planar.pdf(back));
+            }
+        }
     }
 
     /// The solid-angle density (per steradian) with which [`Self::sample`] produces
@@ -601,6 +732,159 @@ pub(crate) fn solid_angle_density(planar_pdf: f32, inv_jacobian: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A sample's pdf is what `pdf` gives at its direction, bit for bit (and its
+    /// radiance `radiance`'s, up to the round trip), for every sampler, mapping, rotation and a
+    /// reduced table: at random ξ, and at points placed a few ulps inside every
+    /// cell's edges and corners, where the f32 round trip point → direction →
+    /// point crosses into the neighbour unless the point is settled.
+    #[test]
+    fn constant_density_samples_are_exact_at_their_directions() {
+        // Neighbouring cells differ by up to 50×, so a sample reporting its
+        // neighbour's density would show.
+        let image = EnvImage::from_fn(64, 32, |x, y| {
+            let v = 0.02 + ((x * 7 + y * 13) % 5) as f32 * (1.0 + (x % 3) as f32 * 0.25);
+            [v, 0.5 * v, 0.25 * v]
+        })
+        .unwrap();
+        let mut settled_any = 0;
+        for sampler in Sampler::ALL {
+            for mapping in Mapping::ALL {
+                for (rotate, table_width) in [(0.0, None), (37.0, None), (0.0, Some(32))] {
+                    let options = LightOptions {
+                        sampler,
+                        mapping,
+                        rotation: Rotation::about_z_degrees(rotate),
+                        table_width,
+                        ..Default::default()
+                    };
+                    let Ok(light) = EnvironmentLight::new(image.clone(), options) else {
+                        continue;
+                    };
+                    let name = format!(
+                        "{} {} {rotate} {table_width:?}",
+                        sampler.name(),
+                        mapping.name()
+                    );
+                    let check = |s: Option<LightSample>| {
+                        let Some(s) = s else { return };
+                        assert_eq!(
+                            light.pdf(s.direction).to_bits(),
+                            s.pdf.to_bits(),
+                            "{name}: {s:?}"
+                        );
+                        // The radiance at the drawn point (at the returned direction's
+                        // own point for settled ones): the same up to the round trip.
+                        let l = light.radiance(s.direction);
+                        for c in 0..3 {
+                            assert!(
+                                (l[c] - s.radiance[c]).abs() <= 2e-3 * l[c].max(1e-3),
+                                "{name}: {s:?} vs {l:?}"
+                            );
+                        }
+                    };
+                    for k in 0..20_000 {
+                        check(light.sample(crate::rng::xi_2d(3, k)));
+                    }
+                    // Points next to every cell's edges, as a sampler could place them.
+                    let [nu, nv] = light.table_size();
+                    for iv in 0..nv {
+                        for iu in 0..nu {
+                            let cell = [iu, iv];
+                            let pdf = light.planar.pdf([
+                                (iu as f32 + 0.5) / nu as f32,
+                                (iv as f32 + 0.5) / nv as f32,
+                            ]);
+                            let lo = |i: usize, n: usize| (i as f32 / n as f32).next_up().next_up();
+                            let hi = |i: usize, n: usize| {
+                                ((i + 1) as f32 / n as f32).next_down().next_down()
+                            };
+                            for uv in [
+                                [lo(iu, nu), lo(iv, nv)],
+                                [hi(iu, nu), hi(iv, nv)],
+                                [lo(iu, nu), hi(iv, nv)],
+                                [hi(iu, nu), (iv as f32 + 0.5) / nv as f32],
+                            ] {
+                                let s = Sample2D { uv, pdf, cell };
+                                if light.cell_of(uv) != cell {
+                                    continue;
+                                }
+                                let direction = light.uv_to_direction(uv);
+                                let (back, _) =
+                                    light.options.mapping.to_uv(light.to_light(direction));
+                                settled_any += (light.cell_of(back) != cell) as usize;
+                                let sample = light.finish_sample(s, false);
+                                check(sample);
+                                if let Some(sample) = sample {
+                                    assert_eq!(
+                                        sample.pdf.to_bits(),
+                                        solid_angle(
+                                            pdf,
+                                            light
+                                                .options
+                                                .mapping
+                                                .to_uv(light.to_light(sample.direction))
+                                                .1
+                                        )
+                                        .to_bits(),
+                                        "{name}: the cell's own density"
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // The edges did need settling somewhere (else this test checks nothing).
+        assert!(settled_any > 0);
+        eprintln!("{settled_any} edge points settled into their cells");
+    }
+
+    /// The margin that lets a sample skip mapping its direction back is far above
+    /// the f32 round trip's error: point → direction → point, over random points,
+    /// points near the poles and the seam, both mappings, with a rotation.
+    #[test]
+    fn round_trip_stays_within_its_margin() {
+        let image = crate::builtin::sky(64, 32);
+        let mut worst = 0.0f32;
+        for mapping in Mapping::ALL {
+            for rotate in [0.0, 123.0] {
+                let options = LightOptions {
+                    mapping,
+                    rotation: Rotation::about_z_degrees(rotate),
+                    ..Default::default()
+                };
+                let light = EnvironmentLight::new(image.clone(), options).unwrap();
+                let mut rng = crate::rng::SplitMix64::new(9);
+                for k in 0..400_000 {
+                    let (a, b) = (rng.next_f32(), rng.next_f32());
+                    let uv = match k % 4 {
+                        0 => [a, b],
+                        1 => [a, b * 1e-3],
+                        2 => [a, 1.0 - b * 1e-3],
+                        _ => [a * 1e-4, b],
+                    };
+                    // The image's edges are cell edges: points within the margin of
+                    // them (a pole's point, the equal-area square's fold) are always
+                    // mapped back and settled.
+                    let near_edge = |x: f32| x < ROUND_TRIP_MARGIN || 1.0 - x < ROUND_TRIP_MARGIN;
+                    if near_edge(uv[0]) || near_edge(uv[1]) {
+                        continue;
+                    }
+                    let d = light.uv_to_direction(uv);
+                    let (back, _) = light.options.mapping.to_uv(light.to_light(d));
+                    let mut du = (back[0] - uv[0]).abs();
+                    if mapping == Mapping::Equirectangular {
+                        du = du.min(1.0 - du); // the seam
+                    }
+                    worst = worst.max(du).max((back[1] - uv[1]).abs());
+                }
+            }
+        }
+        eprintln!("round trip: worst error {worst:e} of the image (margin {ROUND_TRIP_MARGIN:e})");
+        assert!(worst * 10.0 <= ROUND_TRIP_MARGIN, "{worst:e}");
+    }
 
     #[test]
     fn constant_map_integrates_to_4pi_and_has_uniform_pdf() {
