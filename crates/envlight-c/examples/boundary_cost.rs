@@ -16,6 +16,9 @@ use std::time::Instant;
 use envlight::{EnvironmentLight, LightOptions, Vec3};
 use envlight_c::*;
 
+/// A query's name, its Rust call and its C call.
+type Row<'a> = (&'static str, Box<dyn FnMut() + 'a>, Box<dyn FnMut() + 'a>);
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let (mut map, mut queries, mut rounds) = (None, 1usize << 20, 7usize);
@@ -74,7 +77,7 @@ fn main() {
     let (mut rgb_out, mut c_rgb) = (vec![[0.0f32; 3]; queries], vec![0.0f32; 3 * queries]);
     let n = queries;
 
-    let rows: Vec<(&str, Box<dyn FnMut() + '_>, Box<dyn FnMut() + '_>)> = vec![
+    let rows: Vec<Row<'_>> = vec![
         (
             "sample_batch",
             Box::new(|| rust.sample_batch(&u, &mut rust_samples)),

@@ -64,11 +64,7 @@ pub extern "C" fn envlight_light_gpu_tables(
 /// Frees GPU tables (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_gpu_tables_free(tables: *mut envlight_gpu_tables) {
-    if !tables.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(unsafe { Box::from_raw(tables) })
-        }));
-    }
+    crate::free(tables);
 }
 
 /// Which of the three buffers `envlight_gpu_tables_buffer` returns.

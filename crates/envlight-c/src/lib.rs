@@ -784,9 +784,15 @@ fn light_from_rgb(
 /// valid.
 #[no_mangle]
 pub extern "C" fn envlight_light_free(light: *mut envlight_light) {
-    if !light.is_null() {
-        // Dropping frees memory only; nothing here can panic into C.
-        let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(light) })));
+    free(light);
+}
+
+/// Frees a handle made by [`put`] (NULL: nothing), never unwinding into C.
+pub(crate) fn free<T>(handle: *mut T) {
+    if !handle.is_null() {
+        // SAFETY: a non-NULL handle came from `put`'s `Box::into_raw`, and the C
+        // contract frees it once.
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(handle) })));
     }
 }
 

@@ -67,11 +67,7 @@ pub extern "C" fn envlight_portal_light_new(
 /// Frees a portal light (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_portal_light_free(light: *mut envlight_portal_light) {
-    if !light.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(unsafe { Box::from_raw(light) })
-        }));
-    }
+    crate::free(light);
 }
 
 /// Draws a direction from the point `point` through the portals, for `u` in

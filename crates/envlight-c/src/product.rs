@@ -72,11 +72,7 @@ pub extern "C" fn envlight_product_new(
 /// Frees a product sampler (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_product_free(product: *mut envlight_product) {
-    if !product.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(unsafe { Box::from_raw(product) })
-        }));
-    }
+    crate::free(product);
 }
 
 /// Bytes of the product sampler's tables.

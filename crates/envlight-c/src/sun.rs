@@ -62,11 +62,7 @@ pub extern "C" fn envlight_light_extract_sun(
 /// Frees a sun extraction (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_sun_extraction_free(extraction: *mut envlight_sun_extraction) {
-    if !extraction.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(unsafe { Box::from_raw(extraction) })
-        }));
-    }
+    crate::free(extraction);
 }
 
 /// Writes the sun to `*sun` and returns true; false (and `*sun` zeroed) when the
