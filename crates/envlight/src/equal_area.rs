@@ -86,7 +86,7 @@ pub fn square_to_sphere(u: f32, v: f32) -> Vec3 {
 /// The square point `[u, v] ∈ [0, 1]²` looking along `d` (normalised here; a zero
 /// or non-finite `d` gives the centre, +z). On the square's folded boundary one of
 /// the two equivalent points is returned. All in f32 with the angle of
-/// [`crate::math::atan2_pi`] and no branch, so [`spheres_to_square`] computes the
+/// [`crate::math::atan2_pi`] and no branch, so the batch queries compute the
 /// same values in vector lanes.
 #[inline(always)]
 pub fn sphere_to_square(d: Vec3) -> [f32; 2] {
