@@ -444,6 +444,23 @@ pub(crate) fn to_c(s: Option<LightSample>) -> envlight_sample {
     }
 }
 
+/// Whether a point `u` can be sampled: both coordinates finite.
+#[inline(always)]
+pub(crate) fn finite_u(u: [f32; 2]) -> bool {
+    u[0].is_finite() && u[1].is_finite()
+}
+
+/// No direction for the samples drawn at non-finite points (the single calls
+/// draw none there either).
+#[inline(always)]
+pub(crate) fn drop_non_finite(samples: &mut [Option<LightSample>], u: &[[f32; 2]]) {
+    for (s, &u) in samples.iter_mut().zip(u) {
+        if !finite_u(u) {
+            *s = None;
+        }
+    }
+}
+
 /// Samples per parallel task when the library's samples are converted to C's.
 const CHUNK: usize = 1 << 12;
 
@@ -824,7 +841,7 @@ pub extern "C" fn envlight_light_sample(
 /// The light's sample at `u`, none for a non-finite `u`.
 #[inline(always)]
 fn sample_checked(light: &EnvironmentLight, u: [f32; 2]) -> Option<LightSample> {
-    if u[0].is_finite() && u[1].is_finite() {
+    if finite_u(u) {
         light.sample(u)
     } else {
         None
@@ -882,7 +899,7 @@ pub extern "C" fn envlight_light_sample_batch(
         let out: &mut [[envlight_sample; 1]] = unsafe { slice_mut(out, n, F, "out") }?;
         let out = out.as_flattened_mut();
         let light = &light.light;
-        if u.iter().flatten().all(|x| x.is_finite()) {
+        if u.iter().all(|&u| finite_u(u)) {
             draw_batch(out, |range, samples| light.sample_batch(&u[range], samples));
         } else {
             draw_batch(out, |range, samples| {

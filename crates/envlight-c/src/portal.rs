@@ -5,8 +5,8 @@
 use std::sync::Arc;
 
 use crate::{
-    as_vec3, deref, deref_mut, draw_batch, envlight_light, envlight_sample, envlight_status, put,
-    read, run, slice, slice_mut, to_c, value, vec3, Failure,
+    as_vec3, deref, deref_mut, draw_batch, drop_non_finite, envlight_light, envlight_sample,
+    envlight_status, finite_u, put, read, run, slice, slice_mut, to_c, value, vec3, Failure,
 };
 use envlight::portal::{Portal, PortalLight, PortalOptions};
 
@@ -88,7 +88,7 @@ pub extern "C" fn envlight_portal_light_sample(
         let light = unsafe { deref(light, F, "light") }?;
         let p = unsafe { read(point, F, "point") }?;
         let u = unsafe { read(u, F, "u") }?;
-        if u[0].is_finite() && u[1].is_finite() {
+        if finite_u(u) {
             *out = to_c(light.light.sample(vec3(p), u));
         }
         Ok(out.pdf > 0.0)
@@ -133,11 +133,7 @@ pub extern "C" fn envlight_portal_light_sample_batch(
         draw_batch(out.as_flattened_mut(), |range, samples| {
             let u = &u[range.clone()];
             light.sample_batch(&points[range], u, samples);
-            for (s, u) in samples.iter_mut().zip(u) {
-                if !(u[0].is_finite() && u[1].is_finite()) {
-                    *s = None;
-                }
-            }
+            drop_non_finite(samples, u);
         });
         Ok(())
     })

@@ -7,8 +7,8 @@ use envlight::{Factor, ProductOptions, ProductSampler};
 use rayon::prelude::*;
 
 use crate::{
-    as_vec3, deref, deref_mut, draw_batch, envlight_light, envlight_sample, envlight_status, put,
-    read, run, slice, slice_mut, to_c, value, vec3, CHUNK,
+    as_vec3, deref, deref_mut, draw_batch, drop_non_finite, envlight_light, envlight_sample,
+    envlight_status, finite_u, put, read, run, slice, slice_mut, to_c, value, vec3, CHUNK,
 };
 
 /// A product sampler over a light: its tables for every surface normal, built once
@@ -103,7 +103,7 @@ pub extern "C" fn envlight_product_sample(
         let p = unsafe { deref(product, F, "product") }?;
         let f = unsafe { deref(factor, F, "factor") }?;
         let u = unsafe { read(u, F, "u") }?;
-        if u[0].is_finite() && u[1].is_finite() {
+        if finite_u(u) {
             *out = to_c(p.product.sample(&self::factor(f), u));
         }
         Ok(out.pdf > 0.0)
@@ -148,11 +148,7 @@ pub extern "C" fn envlight_product_sample_batch(
             let u = &u[range.clone()];
             let f: Vec<Factor> = factors[range].iter().map(factor).collect();
             p.sample_batch(&f, u, samples);
-            for (s, u) in samples.iter_mut().zip(u) {
-                if !(u[0].is_finite() && u[1].is_finite()) {
-                    *s = None;
-                }
-            }
+            drop_non_finite(samples, u);
         });
         Ok(())
     })
