@@ -5,7 +5,8 @@
 //! runs; the peer table itself comes from the Python script.
 //!
 //! `RAYON_NUM_THREADS=1 cargo run --release --example peer_queries -- [WIDTH ...]
-//! [DENSITY ...]` (1024 2048 4096 and both densities by default).
+//! [DENSITY ...] [sample|pdf|radiance ...]` (1024 2048 4096, both densities and
+//! all three queries by default).
 
 #[path = "common/sun_sky.rs"]
 mod sun_sky;
@@ -44,13 +45,33 @@ fn timed_together(runs: &mut [&mut dyn FnMut()]) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// [`timed_together`] of `runs` when `timed`; otherwise each run once, untimed
+/// (its figures NaN).
+fn timed_if(timed: bool, runs: &mut [&mut dyn FnMut()]) -> Vec<(f64, f64)> {
+    if timed {
+        return timed_together(runs);
+    }
+    for run in runs.iter_mut() {
+        run();
+    }
+    vec![(f64::NAN, f64::NAN); runs.len()]
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut widths: Vec<usize> = args.iter().filter_map(|s| s.parse().ok()).collect();
+    let queries = ["sample", "pdf", "radiance"];
     let only: Vec<&String> = args
         .iter()
-        .filter(|s| s.parse::<usize>().is_err())
+        .filter(|s| s.parse::<usize>().is_err() && !queries.contains(&s.as_str()))
         .collect();
+    // Queries named on the command line (all three by default) are timed; the
+    // others run once, untimed, where a later query needs their output.
+    let chosen: Vec<&str> = queries
+        .into_iter()
+        .filter(|q| args.iter().any(|a| a == q))
+        .collect();
+    let timed = |q: &str| chosen.is_empty() || chosen.contains(&q);
     if widths.is_empty() {
         widths = vec![1024, 2048, 4096];
     }
@@ -86,8 +107,10 @@ fn main() {
             let xi = &xi;
             runs.push(Box::new(move || light.sample_batch(xi, out)));
         }
-        let sample =
-            timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        let sample = timed_if(
+            timed("sample"),
+            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
+        );
         drop(runs);
         // Each density's own samples are its pdf and radiance queries.
         let dirs: Vec<Vec<Vec3>> = samples
@@ -103,14 +126,20 @@ fn main() {
         for ((light, out), d) in lights.iter().zip(pdfs.iter_mut()).zip(&dirs) {
             runs.push(Box::new(move || light.pdf_batch(d, out)));
         }
-        let pdf = timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        let pdf = timed_if(
+            timed("pdf"),
+            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
+        );
         drop(runs);
         let mut radiance = vec![vec![[0.0f32; 3]; N]; lights.len()];
         let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
         for ((light, out), d) in lights.iter().zip(radiance.iter_mut()).zip(&dirs) {
             runs.push(Box::new(move || light.radiance_batch(d, out)));
         }
-        let rad = timed_together(&mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>());
+        let rad = timed_if(
+            timed("radiance"),
+            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
+        );
         drop(runs);
         let cell = |(best, ratio): (f64, f64)| format!("{best:.1} [{ratio:.2}×]");
         for (k, density) in densities.iter().enumerate() {

@@ -267,6 +267,73 @@ impl BilinearDistribution2D {
         }
     }
 
+    /// The patches of `N` points `(u[j], v[j])` on the texel-centre layout
+    /// (`cells = [w, h]` from [`Self::texel_centre_cells`]), as loops the compiler
+    /// vectorizes: the patches [`Self::locate`] finds, bit for bit.
+    #[inline(always)]
+    pub(crate) fn centred_patches<const N: usize>(
+        cells: [f64; 2],
+        u: &[f32; N],
+        v: &[f32; N],
+    ) -> ([u32; N], [u32; N]) {
+        let (mut i, mut k) = ([0u32; N], [0u32; N]);
+        for j in 0..N {
+            // As `locate_patch`: x ∈ [0, 1], so the floor is in [0, n].
+            i[j] = (unit_closed(u[j]) * cells[0] + 0.5) as u32;
+            k[j] = (unit_closed(v[j]) * cells[1] + 0.5) as u32;
+        }
+        (i, k)
+    }
+
+    /// [`Self::pdf`] at `N` points `(u[j], v[j])` in the patches `[i[j], k[j]]`
+    /// that [`Self::centred_patches`] found for them, as loops the compiler turns
+    /// into vector gathers and f64 vector arithmetic: the same operations as the
+    /// single call, so bit for bit its values.
+    ///
+    /// # Panics
+    /// When a patch is outside the grid.
+    #[inline(always)]
+    pub(crate) fn pdf_in_centred_patches<const N: usize>(
+        &self,
+        [i, k]: [&[u32; N]; 2],
+        u: &[f32; N],
+        v: &[f32; N],
+    ) -> [f32; N] {
+        let (mu, mv) = (self.u.nodes.len(), self.v.nodes.len());
+        assert!(
+            i.iter().all(|&i| (i as usize) + 1 < mu) && k.iter().all(|&k| (k as usize) + 1 < mv),
+            "patch outside the grid"
+        );
+        let (values, un, vn) = (&self.values, &self.u.nodes, &self.v.nodes);
+        let mut out = [0.0f32; N];
+        let probability = self.patches.cell_probabilities_in_grid(i, k);
+        for j in 0..N {
+            let (i, k) = (i[j] as usize, k[j] as usize);
+            let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
+            // SAFETY: i + 1 < mu and k + 1 < mv (checked above), so every index is
+            // below mu mv = values.len(), and the nodes' below mu and mv.
+            let (corners, sides) = unsafe {
+                (
+                    [
+                        *values.get_unchecked(top) as f64,
+                        *values.get_unchecked(top + 1) as f64,
+                        *values.get_unchecked(bottom) as f64,
+                        *values.get_unchecked(bottom + 1) as f64,
+                    ],
+                    [
+                        *un.get_unchecked(i),
+                        *un.get_unchecked(i + 1),
+                        *vn.get_unchecked(k),
+                        *vn.get_unchecked(k + 1),
+                    ],
+                )
+            };
+            let point = [unit_closed(u[j]), unit_closed(v[j])];
+            out[j] = pdf_from_corners(corners, sides, probability[j], point);
+        }
+        out
+    }
+
     /// [`Self::pdf`] at the points `(us[k], v)` of one height, into `out` (as long
     /// as `us`), located and evaluated in blocks ([`Self::pdf_in_patches`]): bit
     /// for bit the single calls.
@@ -667,10 +734,12 @@ fn lerp(t: f64, a: f64, b: f64) -> f64 {
 }
 
 /// `x` in `[0, 1]` as an `f64`; NaN gives 0.
-#[inline]
+#[inline(always)]
 fn unit_closed(x: f32) -> f64 {
+    // Computed on both sides of the select, so that vector lanes need no branch.
+    let y = (x as f64).min(1.0);
     if x > 0.0 {
-        (x as f64).min(1.0)
+        y
     } else {
         0.0
     }

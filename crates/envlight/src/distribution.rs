@@ -52,7 +52,7 @@ pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 /// `ξ ∈ [0, 1)` on the CDF's fixed-point scale: the integer part (for the search,
 /// at most `CDF_ONE - 1`) and the exact product (for the offset within the cell).
 /// Values outside `[0, 1)`, and NaN, are clamped onto it.
-#[inline]
+#[inline(always)]
 fn to_fixed(xi: f32) -> (u32, f64) {
     // `max` also maps NaN to 0.
     let t = (xi as f64 * CDF_ONE as f64)
@@ -185,6 +185,158 @@ impl GuidedCdf<'_> {
         let t = self.cdf[o] as f64 + frac.clamp(0.0, 1.0) * self.width(o) as f64;
         ((t / CDF_ONE as f64) as f32).clamp(0.0, 1.0)
     }
+}
+
+/// `N` lanes of `ξ`, each on its way through a CDF of `n` cells within one
+/// array (lane `j`'s CDF at `cdf[cdf_base[j]..][..n + 1]`): `ξ` on the fixed-point
+/// scale (`⌊t⌋`, `t`), and once the guide is read, the range of CDF indices
+/// `lo..=hi` that holds the lane's cell.
+#[derive(Clone, Copy)]
+pub(crate) struct SearchLanes<const N: usize> {
+    fixed: [u32; N],
+    t: [f64; N],
+    cdf_base: [usize; N],
+    lo: [usize; N],
+    hi: [usize; N],
+}
+
+impl<const N: usize> SearchLanes<N> {
+    /// `ξ` placed on the fixed-point scale, each lane's CDF starting at
+    /// `cdf_base[j]`.
+    #[inline(always)]
+    fn new(xi: &[f32; N], cdf_base: [usize; N]) -> Self {
+        let mut fixed = [0u32; N];
+        let mut t = [0.0f64; N];
+        for j in 0..N {
+            (fixed[j], t[j]) = to_fixed(xi[j]);
+        }
+        Self {
+            fixed,
+            t,
+            cdf_base,
+            lo: [0; N],
+            hi: [0; N],
+        }
+    }
+
+    /// The index of each lane's guide entry in a table of guides, lane `j`'s
+    /// starting at `guide_base[j]`, read with `shift` (as in [`GuidedCdf`]).
+    #[inline(always)]
+    fn guide_slots(&self, guide_base: &[usize; N], shift: u32) -> [usize; N] {
+        let mut slot = [0usize; N];
+        for j in 0..N {
+            slot[j] = guide_base[j] + (self.fixed[j] as u64 >> shift) as usize;
+        }
+        slot
+    }
+
+    /// Reads each lane's guide entries at `slot` (from [`Self::guide_slots`])
+    /// and the next, which bound its cell: the last cell `o` with
+    /// `cdf[o] <= ⌊t⌋`, which the single sample's scan from the first entry
+    /// reaches, lies between them (the last cell for the last slice).
+    ///
+    /// # Safety
+    /// Each slot is in a guide of `1 << (32 - shift)` entries inside `guide`,
+    /// each entry a cell below `n`; each lane's CDF lies inside the `cdf` that
+    /// later calls read.
+    #[inline(always)]
+    unsafe fn bound(&mut self, guide: &[u32], slot: &[usize; N], shift: u32, n: usize) {
+        let last_slice = (1usize << (32 - shift)) - 1;
+        for (j, &slot) in slot.iter().enumerate() {
+            let slice = (self.fixed[j] as u64 >> shift) as usize;
+            let next = slot + (slice < last_slice) as usize;
+            // SAFETY: both are entries of the lane's guide (the caller's promise).
+            let (first, next) = unsafe { (*guide.get_unchecked(slot), *guide.get_unchecked(next)) };
+            let next = if slice < last_slice {
+                next
+            } else {
+                n as u32 - 1
+            };
+            self.lo[j] = self.cdf_base[j] + first as usize;
+            self.hi[j] = self.cdf_base[j] + next as usize;
+        }
+    }
+
+    /// Starts fetching the CDF entries where each lane's search begins.
+    #[inline(always)]
+    fn prefetch(&self, cdf: &[u32]) {
+        for j in 0..N {
+            prefetch_ptr(cdf.as_ptr().wrapping_add(self.lo[j]));
+        }
+    }
+
+    /// The cells, points and widths of [`GuidedCdf::sample_point`], bit for bit:
+    /// a binary search of every lane's range, all lanes a step at a time (a scan
+    /// would take as many passes as the longest of the lanes' scans, which is
+    /// long whenever one lane falls among many faint cells, as in a sun's row),
+    /// then the points, placed as `GuidedCdf::point_from` places them.
+    ///
+    /// # Safety
+    /// As for [`Self::bound`], which must have been called.
+    #[inline(always)]
+    unsafe fn place(&self, cdf: &[u32], n: usize) -> ([u32; N], [f32; N], [u32; N]) {
+        let (mut lo, mut hi) = (self.lo, self.hi);
+        loop {
+            let mut open = false;
+            for j in 0..N {
+                let mid = (lo[j] + hi[j]).div_ceil(2);
+                // SAFETY: `mid` is a cell of the lane's CDF. A lane already found
+                // reads its own cell, whose CDF entry is at most `⌊t⌋`.
+                let below = unsafe { *cdf.get_unchecked(mid) } <= self.fixed[j];
+                (lo[j], hi[j]) = if below {
+                    (mid, hi[j])
+                } else {
+                    (lo[j], mid - 1)
+                };
+                open |= lo[j] < hi[j];
+            }
+            if !open {
+                break;
+            }
+        }
+        let (mut cell, mut point, mut width) = ([0u32; N], [0.0f32; N], [0u32; N]);
+        let n_f64 = len_f64(n);
+        for j in 0..N {
+            // SAFETY: a cell and the entry after it, both in the lane's CDF.
+            let (a, b) = unsafe { (*cdf.get_unchecked(lo[j]), *cdf.get_unchecked(lo[j] + 1)) };
+            let o = lo[j] - self.cdf_base[j];
+            let w = (b - a) as f64;
+            let x = (len_f64(o) * w + (self.t[j] - a as f64)) / (w * n_f64);
+            (cell[j], point[j], width[j]) = (o as u32, x as f32, b - a);
+        }
+        (cell, nudge_into_cell_lanes(&point, &cell, n), width)
+    }
+}
+
+/// [`nudge_into_cell`] of `N` points `x[j]` (each in `[0, 1)` but for rounding,
+/// and within a few ulps of its cell) into their cells `cell[j]` on a grid of
+/// `n < 2³¹` cells, with selects: the same values.
+#[inline(always)]
+fn nudge_into_cell_lanes<const N: usize>(x: &[f32; N], cell: &[u32; N], n: usize) -> [f32; N] {
+    let last = (n - 1) as i32;
+    let scale = len_f32(n);
+    let mut out = [0.0f32; N];
+    for j in 0..N {
+        let mut y = x[j].min(ONE_MINUS_EPSILON);
+        let c = cell[j] as i32;
+        // Four tries, as `nudge_into_cell`, which stops at the first that finds
+        // the cell: once found, a try changes nothing. The points are not
+        // negative, so the neighbouring floats are a step of the bits.
+        for _ in 0..4 {
+            let found = floor_index_i32(y * scale, last);
+            let bits = y.to_bits();
+            let bits = if found > c {
+                bits - 1
+            } else if found < c {
+                bits + 1
+            } else {
+                bits
+            };
+            y = f32::from_bits(bits);
+        }
+        out[j] = y;
+    }
+    out
 }
 
 /// The cell of `x ∈ [0, 1]` on a grid of `n` cells, `⌊x n⌋` clamped to `[0, n-1]`.
@@ -566,6 +718,29 @@ pub struct Distribution2D {
     inv_nu: f32,
 }
 
+/// `N` samples of a [`Distribution2D`] between the stages of
+/// [`Distribution2D::rows_lanes`]: their rows `iv`, the points `v` and widths in
+/// them, and the searches in the rows.
+#[derive(Clone, Copy)]
+pub(crate) struct RowLanes<const N: usize> {
+    v: [f32; N],
+    wv: [u32; N],
+    iv: [u32; N],
+    cells: SearchLanes<N>,
+    slot: [usize; N],
+}
+
+/// `N` continuous samples of a [`Distribution2D`], lane by lane: the points
+/// `(u, v)`, their densities and their cells `[iu, iv]`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SampleLanes<const N: usize> {
+    pub u: [f32; N],
+    pub v: [f32; N],
+    pub pdf: [f32; N],
+    pub iu: [u32; N],
+    pub iv: [u32; N],
+}
+
 /// A continuous sample of a 2D distribution.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample2D {
@@ -790,6 +965,34 @@ impl Distribution2D {
         [wu, wv]
     }
 
+    /// [`Self::cell_pdf_in_grid`] of `N` cells at once (`iu[i] < nu`, `iv[i] < nv`,
+    /// as [`cell_indices`] gives them), as loops the compiler turns into vector
+    /// gathers and vector f64 arithmetic: the same operations, bit for bit.
+    #[inline(always)]
+    pub(crate) fn cell_pdfs_in_grid<const N: usize>(
+        &self,
+        iu: &[u32; N],
+        iv: &[u32; N],
+    ) -> [f32; N] {
+        let (cdf, marginal) = (&self.conditional_cdf, &self.marginal.cdf);
+        let stride = self.nu + 1;
+        let mut out = [0.0f32; N];
+        for i in 0..N {
+            let (u, v) = (iu[i] as usize, iv[i] as usize);
+            debug_assert!(u < self.nu && v < self.nv);
+            let at = v * stride + u;
+            // SAFETY: as in `cell_widths_in_grid`, for u < nu and v < nv.
+            let (wu, wv) = unsafe {
+                (
+                    cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
+                    marginal.get_unchecked(v + 1) - marginal.get_unchecked(v),
+                )
+            };
+            out[i] = self.pdf_of_widths(wu, wv);
+        }
+        out
+    }
+
     #[inline(always)]
     fn pdf_of_widths(&self, wu: u32, wv: u32) -> f32 {
         (wu as f64 * wv as f64 * self.pdf_scale) as f32
@@ -904,6 +1107,40 @@ impl Distribution2D {
         probability_of_widths(self.cell_widths_in_grid(iu, iv))
     }
 
+    /// [`Self::cell_probability`] of `N` cells in the grid (`iu[j] < nu`,
+    /// `iv[j] < nv`), in vector lanes, bit for bit.
+    ///
+    /// # Panics
+    /// When a cell is outside the grid.
+    #[inline(always)]
+    pub(crate) fn cell_probabilities_in_grid<const N: usize>(
+        &self,
+        iu: &[u32; N],
+        iv: &[u32; N],
+    ) -> [f64; N] {
+        assert!(
+            iu.iter().all(|&u| (u as usize) < self.nu)
+                && iv.iter().all(|&v| (v as usize) < self.nv),
+            "cell outside the grid"
+        );
+        let (cdf, marginal) = (&self.conditional_cdf, &self.marginal.cdf);
+        let stride = self.nu + 1;
+        let mut out = [0.0f64; N];
+        for j in 0..N {
+            let (u, v) = (iu[j] as usize, iv[j] as usize);
+            let at = v * stride + u;
+            // SAFETY: as in `cell_widths_in_grid`, for u < nu and v < nv.
+            let widths = unsafe {
+                [
+                    cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
+                    marginal.get_unchecked(v + 1) - marginal.get_unchecked(v),
+                ]
+            };
+            out[j] = probability_of_widths(widths);
+        }
+        out
+    }
+
     /// The `ξ` that [`Self::sample_cell`] maps to cell `cell` with `offset`: the
     /// inverse of the choice, whatever rule placed the point in the cell.
     #[inline]
@@ -967,6 +1204,86 @@ impl Distribution2D {
         }
         for ((o, row), &c) in out.iter_mut().zip(&rows).zip(&candidates) {
             *o = finish(self.row(row.iv), c, row.fixed, row.t, row.iv, &row.row);
+        }
+    }
+
+    /// The first stage of [`Self::sample_continuous`] for `N` lanes of `ξ` in
+    /// vector lanes: the rows, from the marginal (small, so in cache), and where
+    /// in each row's guide its `ξ0` falls. [`Self::prefetch_guides`],
+    /// [`Self::bound_lanes`], [`Self::prefetch_cdfs`] and [`Self::finish_lanes`]
+    /// go on from there; a caller runs each stage over several blocks before the
+    /// next, so that each block's memory is on its way while the others work.
+    #[inline(always)]
+    pub(crate) fn rows_lanes<const N: usize>(&self, xi0: &[f32; N], xi1: &[f32; N]) -> RowLanes<N> {
+        let marginal = self.marginal.view();
+        let mut rows = SearchLanes::new(xi1, [0; N]);
+        let slot = rows.guide_slots(&[0; N], marginal.shift);
+        // SAFETY: one CDF and guide, the marginal's own, of nv cells.
+        let (iv, v, wv) = unsafe {
+            rows.bound(marginal.guide, &slot, marginal.shift, self.nv);
+            rows.place(marginal.cdf, self.nv)
+        };
+        let (stride, guide_len) = (self.nu + 1, 1usize << self.row_guide_bits);
+        let (mut cdf_base, mut guide_base) = ([0usize; N], [0usize; N]);
+        for j in 0..N {
+            cdf_base[j] = iv[j] as usize * stride;
+            guide_base[j] = iv[j] as usize * guide_len;
+        }
+        let cells = SearchLanes::new(xi0, cdf_base);
+        let slot = cells.guide_slots(&guide_base, 32 - self.row_guide_bits);
+        RowLanes {
+            v,
+            wv,
+            iv,
+            cells,
+            slot,
+        }
+    }
+
+    /// Starts fetching the row guide entries that [`Self::bound_lanes`] reads.
+    #[inline(always)]
+    pub(crate) fn prefetch_guides<const N: usize>(&self, rows: &RowLanes<N>) {
+        for &slot in &rows.slot {
+            prefetch_ptr(self.conditional_guide.as_ptr().wrapping_add(slot));
+        }
+    }
+
+    /// Reads the row guides of `rows`, bounding each lane's cell.
+    #[inline(always)]
+    pub(crate) fn bound_lanes<const N: usize>(&self, rows: &mut RowLanes<N>) {
+        // SAFETY: the slots are in the guides of rows below nv, as `Self::row`
+        // slices them, whose entries are cells below nu.
+        unsafe {
+            rows.cells.bound(
+                &self.conditional_guide,
+                &rows.slot,
+                32 - self.row_guide_bits,
+                self.nu,
+            )
+        };
+    }
+
+    /// Starts fetching the CDF entries where [`Self::finish_lanes`] searches.
+    #[inline(always)]
+    pub(crate) fn prefetch_cdfs<const N: usize>(&self, rows: &RowLanes<N>) {
+        rows.cells.prefetch(&self.conditional_cdf);
+    }
+
+    /// The last stage: the cells in the rows, the points, the densities.
+    #[inline(always)]
+    pub(crate) fn finish_lanes<const N: usize>(&self, rows: &RowLanes<N>) -> SampleLanes<N> {
+        // SAFETY: bounded by `bound_lanes` in the CDFs of rows below nv.
+        let (iu, u, wu) = unsafe { rows.cells.place(&self.conditional_cdf, self.nu) };
+        let mut pdf = [0.0f32; N];
+        for j in 0..N {
+            pdf[j] = self.pdf_of_widths(wu[j], rows.wv[j]);
+        }
+        SampleLanes {
+            u,
+            v: rows.v,
+            pdf,
+            iu,
+            iv: rows.iv,
         }
     }
 
@@ -1034,6 +1351,79 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The lanes sampler's stages (`rows_lanes` … `finish_lanes`), run over blocks
+    /// of 16 as the batch queries run them: bit for bit the single samples, on
+    /// grids with a sun (long binary searches among faint cells), zero rows,
+    /// zero columns, trailing zero cells, a single column and a single row, and
+    /// a black grid, for ordinary `ξ`, the ends of [0, 1), and values outside it.
+    #[test]
+    fn lanes_sampling_equals_single_samples() {
+        let mut rng = crate::rng::SplitMix64::new(34);
+        let sun = |nu: usize, nv: usize| -> Vec<f32> {
+            let mut f: Vec<f32> = (0..nu * nv).map(|k| 0.01 + (k % 7) as f32 * 1e-3).collect();
+            f[(nv / 3) * nu + nu / 2] = 1e6;
+            f[(nv / 3) * nu + nu / 2 + 1] = 3e5;
+            f
+        };
+        let mut zeros = sun(64, 32);
+        for k in 0..64 {
+            zeros[5 * 64 + k] = 0.0;
+            zeros[k * 32 % (64 * 32)] = 0.0;
+        }
+        for k in 60..64 {
+            for r in 0..32 {
+                zeros[r * 64 + k] = 0.0;
+            }
+        }
+        let grids: Vec<(Vec<f32>, usize)> = vec![
+            (sun(256, 128), 256),
+            (sun(3, 1000), 3),
+            (zeros, 64),
+            ((0..40).map(|k| (k * k) as f32).collect(), 1),
+            ((0..40).map(|k| (k % 3) as f32).collect(), 40),
+            (vec![0.0; 12 * 6], 12),
+        ];
+        let mut xi: Vec<[f32; 2]> = (0..4000)
+            .map(|_| [rng.next_f32(), rng.next_f32()])
+            .collect();
+        for e in [0.0, ONE_MINUS_EPSILON, 1.0, -0.5, 2.0, f32::NAN, 1e-30, 0.5] {
+            xi.push([e, rng.next_f32()]);
+            xi.push([rng.next_f32(), e]);
+            xi.push([e, e]);
+        }
+        for (f, nu) in grids {
+            let d = Distribution2D::new(&f, nu);
+            for block in xi.chunks(16) {
+                let (mut xi0, mut xi1) = ([0.0f32; 16], [0.0f32; 16]);
+                for (j, x) in block.iter().enumerate() {
+                    (xi0[j], xi1[j]) = (x[0], x[1]);
+                }
+                let mut rows = d.rows_lanes(&xi0, &xi1);
+                d.prefetch_guides(&rows);
+                d.bound_lanes(&mut rows);
+                d.prefetch_cdfs(&rows);
+                let s = d.finish_lanes(&rows);
+                for (j, &x) in block.iter().enumerate() {
+                    let single = d.sample_continuous(x);
+                    let lane = Sample2D {
+                        uv: [s.u[j], s.v[j]],
+                        pdf: s.pdf[j],
+                        cell: [s.iu[j] as usize, s.iv[j] as usize],
+                    };
+                    assert_eq!(
+                        (lane.uv.map(f32::to_bits), lane.pdf.to_bits(), lane.cell),
+                        (
+                            single.uv.map(f32::to_bits),
+                            single.pdf.to_bits(),
+                            single.cell
+                        ),
+                        "grid {nu} wide, ξ {x:?}"
+                    );
+                }
+            }
+        }
+    }
 
     fn close(a: f32, b: f32) -> bool {
         (a - b).abs() <= 1e-6 * (1.0 + b.abs())

@@ -5,9 +5,9 @@
 
 use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
 use crate::bilinear::BilinearDistribution2D;
-use crate::distribution::{cell_indices, Sample2D, STAGED_BLOCK};
+use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
-use crate::mapping::{directions_to_equirect_and_csc, EQUIRECT_JACOBIAN};
+use crate::mapping::{directions_to_equirect_and_csc, radius_and_csc, EQUIRECT_JACOBIAN};
 use crate::math::{is_positive_finite, Vec3};
 use rayon::prelude::*;
 
@@ -22,7 +22,8 @@ impl EnvironmentLight {
         // The bilinear density's samples end in vectorized pdfs, which wider vectors
         // speed up; the others' are scalar code, which measured 5-15% slower when
         // compiled for them (BENCHMARKS.md, session 8).
-        let wide = matches!(self.planar, Planar::Bilinear(_)).then(Self::sample_chunk_wide);
+        let wide = matches!(self.planar, Planar::Bilinear(_) | Planar::Inversion(_))
+            .then(Self::sample_chunk_wide);
         self.run_batch(xi, out, Self::sample_chunk, wide);
     }
 
@@ -41,7 +42,7 @@ impl EnvironmentLight {
                 out,
                 None,
                 #[inline(always)]
-                |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+                |xi, out| inversion_block(d, xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
             ),
             Planar::Alias(d) => self.sample_blocks(
                 xi,
@@ -102,42 +103,91 @@ impl EnvironmentLight {
     }
 
     /// [`Self::finish_sample`] of a block of samples of a piecewise-constant
-    /// density: the directions first, then their image points and Jacobians
-    /// together in vector lanes ([`Self::to_uv_block`], bit for bit the single
-    /// query's), then each sample's check that it came back to its cell.
+    /// density, [`QUERY_BLOCK`] at a time in vector lanes: the directions, their
+    /// reciprocal Jacobians and the radiance at the drawn points (bit for bit the
+    /// single query's). The few samples next to a cell's edge, whose direction
+    /// might map back into the neighbour, take the single query's path.
     #[inline(always)]
     fn finish_constant_block(&self, planar: &[Sample2D], out: &mut [Option<LightSample>]) {
         for (planar, out) in planar.chunks(QUERY_BLOCK).zip(out.chunks_mut(QUERY_BLOCK)) {
-            let mut directions = [Vec3::new(0.0, 0.0, 1.0); QUERY_BLOCK];
-            let mut xyz = [
-                [0.0f32; QUERY_BLOCK],
-                [0.0; QUERY_BLOCK],
-                [1.0; QUERY_BLOCK],
-            ];
-            let mut all_clear = true;
-            for (i, p) in planar.iter().enumerate() {
-                let d = self.uv_to_direction(p.uv);
-                directions[i] = d;
-                (xyz[0][i], xyz[1][i], xyz[2][i]) = (d.x, d.y, d.z);
-                all_clear &= p.pdf == 0.0 || self.clear_of_edges(p);
+            let (mut u, mut v) = ([0.5f32; QUERY_BLOCK], [0.5f32; QUERY_BLOCK]);
+            for (j, p) in planar.iter().enumerate() {
+                (u[j], v[j]) = (p.uv[0], p.uv[1]);
             }
-            // Points next to an edge (a few per block on a fine table) are mapped
-            // back together, in vector lanes.
-            let back = (!all_clear).then(|| {
-                let [x, y, z] = xyz;
-                self.to_uv_block(x, y, z)
-            });
-            for (i, (o, &p)) in out.iter_mut().zip(planar).enumerate() {
-                *o = match &back {
-                    _ if p.pdf == 0.0 => None,
-                    Some(back) if !self.clear_of_edges(&p) => {
-                        let uv = [back.u[i], back.v[i]];
-                        self.finish_constant(p, directions[i], uv, back.inv_jacobian[i])
-                    }
-                    _ => self.finish_clear(p, directions[i]),
+            let [x, y, z] = self.directions_lanes(&u, &v);
+            let inv_jacobian = self.inv_jacobians_lanes(&x, &y, &z);
+            let (mode, wrap) = (self.options.lookup, self.options.mapping.wrap());
+            let lookups = self.image.lookup_block(&u, &v, mode, wrap);
+            let scale = self.options.scale;
+            for (j, (o, &p)) in out.iter_mut().zip(planar).enumerate() {
+                let direction = Vec3::new(x[j], y[j], z[j]);
+                *o = if p.pdf == 0.0 {
+                    None
+                } else if self.clear_of_edges(&p) {
+                    let pdf = solid_angle(p.pdf, inv_jacobian[j]);
+                    is_positive_finite(pdf).then(|| {
+                        let l = self.image.fetch(&lookups, j);
+                        LightSample {
+                            direction,
+                            pdf,
+                            radiance: [l[0] * scale, l[1] * scale, l[2] * scale],
+                            uv: p.uv,
+                        }
+                    })
+                } else {
+                    let (back, inv_jacobian) = self.options.mapping.to_uv(self.to_light(direction));
+                    self.finish_constant(p, direction, back, inv_jacobian)
                 };
             }
         }
+    }
+
+    /// [`Self::uv_to_direction`] of `N` image points, in vector lanes where the
+    /// mapping's arithmetic allows (the lat-long map's); bit for bit.
+    #[inline(always)]
+    fn directions_lanes<const N: usize>(&self, u: &[f32; N], v: &[f32; N]) -> [[f32; N]; 3] {
+        let (mut x, mut y, mut z) = ([0.0f32; N], [0.0f32; N], [1.0f32; N]);
+        match self.options.mapping {
+            Mapping::Equirectangular => {
+                for j in 0..N {
+                    let (d, _) = crate::mapping::equirect_to_direction(u[j], v[j]);
+                    (x[j], y[j], z[j]) = (d.x, d.y, d.z);
+                }
+            }
+            Mapping::EqualArea => {
+                for j in 0..N {
+                    let d = equal_area::square_to_sphere(u[j], v[j]);
+                    (x[j], y[j], z[j]) = (d.x, d.y, d.z);
+                }
+            }
+        }
+        if self.rotated {
+            let m = &self.options.rotation;
+            for j in 0..N {
+                let d = m.apply(Vec3::new(x[j], y[j], z[j]));
+                (x[j], y[j], z[j]) = (d.x, d.y, d.z);
+            }
+        }
+        [x, y, z]
+    }
+
+    /// [`Mapping::inv_jacobian`] at `N` world directions (rotated into the light's
+    /// frame first, as [`Self::pdf`] does), in vector lanes; bit for bit.
+    #[inline(always)]
+    fn inv_jacobians_lanes<const N: usize>(
+        &self,
+        x: &[f32; N],
+        y: &[f32; N],
+        z: &[f32; N],
+    ) -> [f32; N] {
+        let mut out = [1.0 / EQUAL_AREA_JACOBIAN; N];
+        if self.options.mapping == Mapping::Equirectangular {
+            for j in 0..N {
+                let d = self.to_light(Vec3::new(x[j], y[j], z[j]));
+                out[j] = radius_and_csc(d).1 * (1.0 / EQUIRECT_JACOBIAN);
+            }
+        }
+        out
     }
 
     /// [`Self::finish_sample`] of a block of samples of a continuous density: the
@@ -221,12 +271,12 @@ impl EnvironmentLight {
     #[inline(always)]
     fn pdf_chunk(&self, dirs: &[Vec3], out: &mut [f32]) {
         match &self.planar {
-            Planar::Inversion(d) => self.pdf_cells(
+            Planar::Inversion(d) => self.pdf_cell_lanes(
                 dirs,
                 out,
                 [d.nu(), d.nv()],
                 |iu, iv| d.prefetch_cell(iu, iv),
-                |iu, iv| d.cell_pdf_in_grid(iu, iv),
+                |iu, iv| d.cell_pdfs_in_grid(iu, iv),
             ),
             Planar::Alias(d) => self.pdf_cells(
                 dirs,
@@ -248,10 +298,49 @@ impl EnvironmentLight {
 
     /// [`Self::pdf_chunk`] for the bilinear density `d`: each block's patches
     /// located (and with `PREFETCH`, their data fetched a block ahead), then their
-    /// densities in vector lanes. Sampling, whose patches are in cache already,
-    /// skips the prefetches.
+    /// densities, in vector lanes where the nodes are the texel-centre layout (as
+    /// the light builds them). Sampling, whose patches are in cache already, skips
+    /// the prefetches.
     #[inline(always)]
     fn bilinear_pdfs<const PREFETCH: bool>(
+        &self,
+        d: &BilinearDistribution2D,
+        dirs: &[Vec3],
+        out: &mut [f32],
+    ) {
+        let Some([w, h]) = d.texel_centre_cells() else {
+            return self.bilinear_pdfs_located::<PREFETCH>(d, dirs, out);
+        };
+        let cells = [w as f64, h as f64];
+        self.uv_blocks(
+            dirs,
+            out,
+            #[inline(always)]
+            |block| {
+                let (i, k) = BilinearDistribution2D::centred_patches(cells, &block.u, &block.v);
+                if PREFETCH {
+                    for (&i, &k) in i.iter().zip(&k) {
+                        d.prefetch_patch([i as usize, k as usize]);
+                    }
+                }
+                (*block, i, k)
+            },
+            #[inline(always)]
+            |(block, i, k): &(UvBlock, [u32; QUERY_BLOCK], [u32; QUERY_BLOCK]), out| {
+                let planar = d.pdf_in_centred_patches([i, k], &block.u, &block.v);
+                let mut pdf = [0.0f32; QUERY_BLOCK];
+                for j in 0..QUERY_BLOCK {
+                    pdf[j] = solid_angle(planar[j], block.inv_jacobian[j]);
+                }
+                out.copy_from_slice(&pdf[..out.len()]);
+            },
+        )
+    }
+
+    /// [`Self::bilinear_pdfs`] for any node layout: each lane's patch located
+    /// through the nodes' guide tables.
+    #[inline(always)]
+    fn bilinear_pdfs_located<const PREFETCH: bool>(
         &self,
         d: &BilinearDistribution2D,
         dirs: &[Vec3],
@@ -321,6 +410,44 @@ impl EnvironmentLight {
                     let planar = cell_pdf(cells.iu[i] as usize, cells.iv[i] as usize);
                     *o = solid_angle(planar, cells.inv_jacobian[i]);
                 }
+            },
+        );
+    }
+
+    /// [`Self::pdf_cells`] with the cells' densities read a block at a time, in
+    /// vector lanes (`cell_pdfs`).
+    #[inline(always)]
+    fn pdf_cell_lanes(
+        &self,
+        dirs: &[Vec3],
+        out: &mut [f32],
+        [nu, nv]: [usize; 2],
+        prefetch: impl Fn(usize, usize),
+        cell_pdfs: impl Fn(&[u32; QUERY_BLOCK], &[u32; QUERY_BLOCK]) -> [f32; QUERY_BLOCK],
+    ) {
+        self.uv_blocks(
+            dirs,
+            out,
+            #[inline(always)]
+            |block| {
+                let (iu, iv) = (cell_indices(&block.u, nu), cell_indices(&block.v, nv));
+                for (&iu, &iv) in iu.iter().zip(&iv) {
+                    prefetch(iu as usize, iv as usize);
+                }
+                CellBlock {
+                    iu,
+                    iv,
+                    inv_jacobian: block.inv_jacobian,
+                }
+            },
+            #[inline(always)]
+            |cells: &CellBlock, out| {
+                let planar = cell_pdfs(&cells.iu, &cells.iv);
+                let mut pdf = [0.0f32; QUERY_BLOCK];
+                for i in 0..QUERY_BLOCK {
+                    pdf[i] = solid_angle(planar[i], cells.inv_jacobian[i]);
+                }
+                out.copy_from_slice(&pdf[..out.len()]);
             },
         );
     }
@@ -451,6 +578,50 @@ impl EnvironmentLight {
                 }
             },
         )
+    }
+}
+
+/// [`Distribution2D::sample_continuous_hinted`] of a block of `ξ` (at most
+/// [`STAGED_BLOCK`]) in vector lanes, [`QUERY_BLOCK`] at a time, each stage run
+/// over the whole block before the next ([`Distribution2D::rows_lanes`]): the
+/// block's cache misses overlap. Bit for bit the single samples; `hint` hears
+/// each point as soon as it is placed.
+#[inline(always)]
+fn inversion_block(
+    d: &Distribution2D,
+    xi: &[[f32; 2]],
+    out: &mut [Sample2D],
+    hint: impl Fn([f32; 2]),
+) {
+    const LANES: usize = STAGED_BLOCK / QUERY_BLOCK;
+    assert!(
+        xi.len() == out.len() && xi.len() <= STAGED_BLOCK,
+        "bad block"
+    );
+    let mut rows = [None; LANES];
+    for (r, xi) in rows.iter_mut().zip(xi.chunks(QUERY_BLOCK)) {
+        let (mut xi0, mut xi1) = ([0.0f32; QUERY_BLOCK], [0.0f32; QUERY_BLOCK]);
+        for (j, x) in xi.iter().enumerate() {
+            (xi0[j], xi1[j]) = (x[0], x[1]);
+        }
+        let lanes = d.rows_lanes(&xi0, &xi1);
+        d.prefetch_guides(&lanes);
+        *r = Some(lanes);
+    }
+    for r in rows.iter_mut().flatten() {
+        d.bound_lanes(r);
+        d.prefetch_cdfs(r);
+    }
+    for (r, out) in rows.iter().flatten().zip(out.chunks_mut(QUERY_BLOCK)) {
+        let s = d.finish_lanes(r);
+        for (j, o) in out.iter_mut().enumerate() {
+            hint([s.u[j], s.v[j]]);
+            *o = Sample2D {
+                uv: [s.u[j], s.v[j]],
+                pdf: s.pdf[j],
+                cell: [s.iu[j] as usize, s.iv[j] as usize],
+            };
+        }
     }
 }
 
@@ -591,7 +762,9 @@ mod tests {
     /// public calls too).
     #[test]
     fn batch_kernels_at_every_width_equal_single_queries() {
-        let image = crate::builtin::sky(96, 48);
+        // A coarse sky, and one whose sun covers a few texels of long rows (the
+        // sampling searches among many faint cells).
+        let images = [crate::builtin::sky(96, 48), crate::builtin::sky(720, 360)];
         let mut dirs: Vec<Vec3> = (0..1_001u64)
             .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(5, k)))
             .collect();
@@ -650,9 +823,12 @@ mod tests {
                 rotation: Rotation::about_z_degrees(20.0),
                 ..Default::default()
             };
-            let light = EnvironmentLight::new(image.clone(), options).unwrap();
-            for &width in &widths {
-                let case = format!("{sampler:?} {density:?} {width:?}");
+            for (image, width) in images
+                .iter()
+                .flat_map(|i| widths.iter().map(move |w| (i, *w)))
+            {
+                let light = EnvironmentLight::new(image.clone(), options).unwrap();
+                let case = format!("{sampler:?} {density:?} {width:?} {}", image.width());
                 let mut pdfs = vec![0.0; dirs.len()];
                 let mut radiance = vec![[0.0; 3]; dirs.len()];
                 let mut samples = vec![None; xi.len()];
