@@ -406,7 +406,7 @@ impl BilinearDistribution2D {
         }
         let mut cells = [CellSample::default(); STAGED_BLOCK];
         let cells = &mut cells[..xi.len().min(STAGED_BLOCK)];
-        self.patches.sample_cell_block(xi, cells);
+        self.patches.sample_cell_lanes_block(xi, cells);
         // Every patch's corners, and whatever the caller reads near it, start
         // loading before the first point is placed.
         for c in cells.iter() {

@@ -40,6 +40,10 @@ use crate::math::{
     advise_huge_pages, floor_index, floor_index_i32, len_f32, len_f64, prefetch_ptr, prefetch_read,
 };
 
+/// Lanes of the vector sampler ([`Distribution2D::staged_lanes`]): enough for
+/// the widest vectors (16 f32 with AVX-512); a divisor of [`STAGED_BLOCK`].
+pub(crate) const SAMPLE_LANES: usize = 16;
+
 /// The most samples [`Distribution2D::sample_block`] takes at once.
 pub const STAGED_BLOCK: usize = 32;
 
@@ -265,16 +269,16 @@ impl<const N: usize> SearchLanes<N> {
         }
     }
 
-    /// The cells, points and widths of [`GuidedCdf::sample_point`], bit for bit:
-    /// a binary search of every lane's range, all lanes a step at a time (a scan
-    /// would take as many passes as the longest of the lanes' scans, which is
-    /// long whenever one lane falls among many faint cells, as in a sun's row),
-    /// then the points, placed as `GuidedCdf::point_from` places them.
+    /// The index in `cdf` of each lane's cell, as [`GuidedCdf::sample_point`]
+    /// finds it: a binary search of every lane's range, all lanes a step at a
+    /// time (a scan would take as many passes as the longest of the lanes'
+    /// scans, which is long whenever one lane falls among many faint cells, as in
+    /// a sun's row).
     ///
     /// # Safety
     /// As for [`Self::bound`], which must have been called.
     #[inline(always)]
-    unsafe fn place(&self, cdf: &[u32], n: usize) -> ([u32; N], [f32; N], [u32; N]) {
+    unsafe fn find(&self, cdf: &[u32]) -> [usize; N] {
         let (mut lo, mut hi) = (self.lo, self.hi);
         loop {
             let mut open = false;
@@ -294,17 +298,55 @@ impl<const N: usize> SearchLanes<N> {
                 break;
             }
         }
+        lo
+    }
+
+    /// The cells at `at` (from [`Self::find`]), the points in them and their
+    /// widths, as [`GuidedCdf::sample_point`] gives them, bit for bit.
+    ///
+    /// # Safety
+    /// `at` from [`Self::find`] on the same `cdf`.
+    #[inline(always)]
+    unsafe fn points(
+        &self,
+        cdf: &[u32],
+        at: &[usize; N],
+        n: usize,
+    ) -> ([u32; N], [f32; N], [u32; N]) {
         let (mut cell, mut point, mut width) = ([0u32; N], [0.0f32; N], [0u32; N]);
         let n_f64 = len_f64(n);
         for j in 0..N {
             // SAFETY: a cell and the entry after it, both in the lane's CDF.
-            let (a, b) = unsafe { (*cdf.get_unchecked(lo[j]), *cdf.get_unchecked(lo[j] + 1)) };
-            let o = lo[j] - self.cdf_base[j];
+            let (a, b) = unsafe { (*cdf.get_unchecked(at[j]), *cdf.get_unchecked(at[j] + 1)) };
+            let o = at[j] - self.cdf_base[j];
             let w = (b - a) as f64;
+            // As `GuidedCdf::point_from`.
             let x = (len_f64(o) * w + (self.t[j] - a as f64)) / (w * n_f64);
             (cell[j], point[j], width[j]) = (o as u32, x as f32, b - a);
         }
         (cell, nudge_into_cell_lanes(&point, &cell, n), width)
+    }
+
+    /// The cells at `at` (from [`Self::find`]), the offsets of `ξ` in their CDF
+    /// segments and their widths, as [`GuidedCdf::sample`] gives them, bit for
+    /// bit.
+    ///
+    /// # Safety
+    /// `at` from [`Self::find`] on the same `cdf`.
+    #[inline(always)]
+    unsafe fn offsets(&self, cdf: &[u32], at: &[usize; N]) -> ([u32; N], [f64; N], [u32; N]) {
+        let (mut cell, mut offset, mut width) = ([0u32; N], [0.0f64; N], [0u32; N]);
+        for j in 0..N {
+            // SAFETY: a cell and the entry after it, both in the lane's CDF.
+            let (a, b) = unsafe { (*cdf.get_unchecked(at[j]), *cdf.get_unchecked(at[j] + 1)) };
+            let w = b - a;
+            (cell[j], offset[j], width[j]) = (
+                (at[j] - self.cdf_base[j]) as u32,
+                (self.t[j] - a as f64) / w as f64,
+                w,
+            );
+        }
+        (cell, offset, width)
     }
 }
 
@@ -719,15 +761,23 @@ pub struct Distribution2D {
 }
 
 /// `N` samples of a [`Distribution2D`] between the stages of
-/// [`Distribution2D::rows_lanes`]: their rows `iv`, the points `v` and widths in
-/// them, and the searches in the rows.
+/// [`Distribution2D::rows_lanes`]: the marginal's search and each lane's row
+/// (its index in the marginal's CDF), and the searches in the rows.
 #[derive(Clone, Copy)]
 pub(crate) struct RowLanes<const N: usize> {
-    v: [f32; N],
-    wv: [u32; N],
-    iv: [u32; N],
+    rows: SearchLanes<N>,
+    row_at: [usize; N],
     cells: SearchLanes<N>,
     slot: [usize; N],
+}
+
+/// `N` cells picked by a [`Distribution2D`], lane by lane, as [`CellSample`]s:
+/// `[iu, iv]`, the offsets of `ξ` in their CDF segments, their widths.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CellLanes<const N: usize> {
+    pub cell: [[u32; N]; 2],
+    pub offset: [[f64; N]; 2],
+    pub widths: [[u32; N]; 2],
 }
 
 /// `N` continuous samples of a [`Distribution2D`], lane by lane: the points
@@ -1074,29 +1124,6 @@ impl Distribution2D {
         }
     }
 
-    /// [`Self::sample_cell`] for a block of `ξ`, staged like [`Self::sample_block`].
-    #[inline(always)]
-    pub(crate) fn sample_cell_block(&self, xi: &[[f32; 2]], out: &mut [CellSample]) {
-        self.staged_block(
-            xi,
-            out,
-            |marginal, x| {
-                let (iv, fv, wv) = marginal.sample(x);
-                (iv, (fv, wv))
-            },
-            |_, _| {},
-            |row, c, fixed, t, iv, &(fv, wv)| {
-                let (iu, lo, hi) = row.segment(c, fixed);
-                let wu = hi - lo;
-                CellSample {
-                    cell: [iu, iv],
-                    offset: [(t - lo as f64) / wu as f64, fv],
-                    widths: [wu, wv],
-                }
-            },
-        );
-    }
-
     /// Probability of picking cell `[iu, iv]`: `width_u · width_v / CDF_ONE²`.
     ///
     /// # Panics
@@ -1219,25 +1246,84 @@ impl Distribution2D {
         let mut rows = SearchLanes::new(xi1, [0; N]);
         let slot = rows.guide_slots(&[0; N], marginal.shift);
         // SAFETY: one CDF and guide, the marginal's own, of nv cells.
-        let (iv, v, wv) = unsafe {
+        let at = unsafe {
             rows.bound(marginal.guide, &slot, marginal.shift, self.nv);
-            rows.place(marginal.cdf, self.nv)
+            rows.find(marginal.cdf)
         };
         let (stride, guide_len) = (self.nu + 1, 1usize << self.row_guide_bits);
         let (mut cdf_base, mut guide_base) = ([0usize; N], [0usize; N]);
         for j in 0..N {
-            cdf_base[j] = iv[j] as usize * stride;
-            guide_base[j] = iv[j] as usize * guide_len;
+            cdf_base[j] = at[j] * stride;
+            guide_base[j] = at[j] * guide_len;
         }
         let cells = SearchLanes::new(xi0, cdf_base);
         let slot = cells.guide_slots(&guide_base, 32 - self.row_guide_bits);
         RowLanes {
-            v,
-            wv,
-            iv,
+            rows,
+            row_at: at,
             cells,
             slot,
         }
+    }
+
+    /// The stages of the lanes sampler ([`Self::rows_lanes`]) over a block of
+    /// `ξ` (at most [`STAGED_BLOCK`]), [`SAMPLE_LANES`] at a time, each stage run
+    /// over the whole block before the next so that the block's cache misses
+    /// overlap; `finish` takes each lane block's last stage and writes its
+    /// results (as many as the lanes hold real `ξ`).
+    ///
+    /// # Panics
+    /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
+    #[inline(always)]
+    pub(crate) fn staged_lanes<R>(
+        &self,
+        xi: &[[f32; 2]],
+        out: &mut [R],
+        finish: impl Fn(&RowLanes<SAMPLE_LANES>, &mut [R]),
+    ) {
+        const BLOCKS: usize = STAGED_BLOCK / SAMPLE_LANES;
+        assert!(
+            xi.len() == out.len() && xi.len() <= STAGED_BLOCK,
+            "bad block"
+        );
+        let mut rows = [None; BLOCKS];
+        for (r, xi) in rows.iter_mut().zip(xi.chunks(SAMPLE_LANES)) {
+            let (mut xi0, mut xi1) = ([0.0f32; SAMPLE_LANES], [0.0f32; SAMPLE_LANES]);
+            for (j, x) in xi.iter().enumerate() {
+                (xi0[j], xi1[j]) = (x[0], x[1]);
+            }
+            let lanes = self.rows_lanes(&xi0, &xi1);
+            self.prefetch_guides(&lanes);
+            *r = Some(lanes);
+        }
+        for r in rows.iter_mut().flatten() {
+            self.bound_lanes(r);
+            self.prefetch_cdfs(r);
+        }
+        for (r, out) in rows.iter().flatten().zip(out.chunks_mut(SAMPLE_LANES)) {
+            finish(r, out);
+        }
+    }
+
+    /// [`Self::sample_cell_block`] in vector lanes ([`Self::staged_lanes`]),
+    /// bit for bit.
+    #[inline(always)]
+    pub(crate) fn sample_cell_lanes_block(&self, xi: &[[f32; 2]], out: &mut [CellSample]) {
+        self.staged_lanes(
+            xi,
+            out,
+            #[inline(always)]
+            |rows, out| {
+                let c = self.finish_cells_lanes(rows);
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = CellSample {
+                        cell: [c.cell[0][j] as usize, c.cell[1][j] as usize],
+                        offset: [c.offset[0][j], c.offset[1][j]],
+                        widths: [c.widths[0][j], c.widths[1][j]],
+                    };
+                }
+            },
+        );
     }
 
     /// Starts fetching the row guide entries that [`Self::bound_lanes`] reads.
@@ -1271,19 +1357,37 @@ impl Distribution2D {
 
     /// The last stage: the cells in the rows, the points, the densities.
     #[inline(always)]
-    pub(crate) fn finish_lanes<const N: usize>(&self, rows: &RowLanes<N>) -> SampleLanes<N> {
-        // SAFETY: bounded by `bound_lanes` in the CDFs of rows below nv.
-        let (iu, u, wu) = unsafe { rows.cells.place(&self.conditional_cdf, self.nu) };
+    pub(crate) fn finish_lanes<const N: usize>(&self, r: &RowLanes<N>) -> SampleLanes<N> {
+        // SAFETY: the marginal's search found `row_at` in its CDF; `bound_lanes`
+        // bounded the cells in the CDFs of those rows.
+        let ((iv, v, wv), (iu, u, wu)) = unsafe {
+            (r.rows.points(&self.marginal.cdf, &r.row_at, self.nv), {
+                let at = r.cells.find(&self.conditional_cdf);
+                r.cells.points(&self.conditional_cdf, &at, self.nu)
+            })
+        };
         let mut pdf = [0.0f32; N];
         for j in 0..N {
-            pdf[j] = self.pdf_of_widths(wu[j], rows.wv[j]);
+            pdf[j] = self.pdf_of_widths(wu[j], wv[j]);
         }
-        SampleLanes {
-            u,
-            v: rows.v,
-            pdf,
-            iu,
-            iv: rows.iv,
+        SampleLanes { u, v, pdf, iu, iv }
+    }
+
+    /// The last stage of [`Self::sample_cell`] in vector lanes: the cells and the
+    /// offsets of `ξ` in their CDF segments, bit for bit.
+    #[inline(always)]
+    pub(crate) fn finish_cells_lanes<const N: usize>(&self, r: &RowLanes<N>) -> CellLanes<N> {
+        // SAFETY: as in `finish_lanes`.
+        let ((iv, fv, wv), (iu, fu, wu)) = unsafe {
+            (r.rows.offsets(&self.marginal.cdf, &r.row_at), {
+                let at = r.cells.find(&self.conditional_cdf);
+                r.cells.offsets(&self.conditional_cdf, &at)
+            })
+        };
+        CellLanes {
+            cell: [iu, iv],
+            offset: [fu, fv],
+            widths: [wu, wv],
         }
     }
 
@@ -1352,7 +1456,8 @@ where
 mod tests {
     use super::*;
 
-    /// The lanes sampler's stages (`rows_lanes` … `finish_lanes`), run over blocks
+    /// The lanes sampler's stages (`rows_lanes` … `finish_lanes` and
+    /// `finish_cells_lanes`), run over blocks
     /// of 16 as the batch queries run them: bit for bit the single samples, on
     /// grids with a sun (long binary searches among faint cells), zero rows,
     /// zero columns, trailing zero cells, a single column and a single row, and
@@ -1404,6 +1509,7 @@ mod tests {
                 d.bound_lanes(&mut rows);
                 d.prefetch_cdfs(&rows);
                 let s = d.finish_lanes(&rows);
+                let c = d.finish_cells_lanes(&rows);
                 for (j, &x) in block.iter().enumerate() {
                     let single = d.sample_continuous(x);
                     let lane = Sample2D {
@@ -1418,6 +1524,17 @@ mod tests {
                             single.pdf.to_bits(),
                             single.cell
                         ),
+                        "grid {nu} wide, ξ {x:?}"
+                    );
+                    let single = d.sample_cell(x);
+                    let lane = CellSample {
+                        cell: [c.cell[0][j] as usize, c.cell[1][j] as usize],
+                        offset: [c.offset[0][j], c.offset[1][j]],
+                        widths: [c.widths[0][j], c.widths[1][j]],
+                    };
+                    assert_eq!(
+                        (lane.cell, lane.offset.map(f64::to_bits), lane.widths),
+                        (single.cell, single.offset.map(f64::to_bits), single.widths),
                         "grid {nu} wide, ξ {x:?}"
                     );
                 }

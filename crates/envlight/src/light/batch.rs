@@ -114,7 +114,7 @@ impl EnvironmentLight {
             for (j, p) in planar.iter().enumerate() {
                 (u[j], v[j]) = (p.uv[0], p.uv[1]);
             }
-            let [x, y, z] = self.directions_lanes(&u, &v);
+            let ([x, y, z], _) = self.directions_lanes(&u, &v);
             let inv_jacobian = self.inv_jacobians_lanes(&x, &y, &z);
             let (mode, wrap) = (self.options.lookup, self.options.mapping.wrap());
             let lookups = self.image.lookup_block(&u, &v, mode, wrap);
@@ -142,16 +142,23 @@ impl EnvironmentLight {
         }
     }
 
-    /// [`Self::uv_to_direction`] of `N` image points, in vector lanes where the
-    /// mapping's arithmetic allows (the lat-long map's); bit for bit.
+    /// [`Self::uv_to_direction`] of `N` image points and the Jacobians there (as
+    /// [`Mapping::to_direction`] gives them), in vector lanes where the mapping's
+    /// arithmetic allows (the lat-long map's); bit for bit.
     #[inline(always)]
-    fn directions_lanes<const N: usize>(&self, u: &[f32; N], v: &[f32; N]) -> [[f32; N]; 3] {
+    fn directions_lanes<const N: usize>(
+        &self,
+        u: &[f32; N],
+        v: &[f32; N],
+    ) -> ([[f32; N]; 3], [f32; N]) {
         let (mut x, mut y, mut z) = ([0.0f32; N], [0.0f32; N], [1.0f32; N]);
+        let mut jacobian = [EQUAL_AREA_JACOBIAN; N];
         match self.options.mapping {
             Mapping::Equirectangular => {
                 for j in 0..N {
-                    let (d, _) = crate::mapping::equirect_to_direction(u[j], v[j]);
+                    let (d, sin_theta) = crate::mapping::equirect_to_direction(u[j], v[j]);
                     (x[j], y[j], z[j]) = (d.x, d.y, d.z);
+                    jacobian[j] = EQUIRECT_JACOBIAN * sin_theta;
                 }
             }
             Mapping::EqualArea => {
@@ -168,7 +175,7 @@ impl EnvironmentLight {
                 (x[j], y[j], z[j]) = (d.x, d.y, d.z);
             }
         }
-        [x, y, z]
+        ([x, y, z], jacobian)
     }
 
     /// [`Mapping::inv_jacobian`] at `N` world directions (rotated into the light's
@@ -191,8 +198,9 @@ impl EnvironmentLight {
     }
 
     /// [`Self::finish_sample`] of a block of samples of a continuous density: the
-    /// directions first, then their pdfs together, in vector lanes, as
-    /// [`Self::pdf_batch`] computes them (so bit for bit [`Self::pdf`]).
+    /// directions and radiance lookups in vector lanes, [`QUERY_BLOCK`] at a time,
+    /// then the pdfs at the directions as [`Self::pdf_batch`] computes them (so
+    /// bit for bit [`Self::pdf`]).
     #[inline(always)]
     fn finish_continuous_block(
         &self,
@@ -203,9 +211,23 @@ impl EnvironmentLight {
         let n = planar.len();
         let mut directions = [Vec3::new(0.0, 0.0, 1.0); STAGED_BLOCK];
         let mut jacobians = [0.0f32; STAGED_BLOCK];
-        for ((d, j), p) in directions.iter_mut().zip(&mut jacobians).zip(planar) {
-            let (local, jacobian) = self.options.mapping.to_direction(p.uv);
-            (*d, *j) = (self.to_world(local), jacobian);
+        let mut radiance = [[0.0f32; 3]; STAGED_BLOCK];
+        let scale = self.options.scale;
+        let (mode, wrap) = (self.options.lookup, self.options.mapping.wrap());
+        for (k, planar) in planar.chunks(QUERY_BLOCK).enumerate() {
+            let (mut u, mut v) = ([0.5f32; QUERY_BLOCK], [0.5f32; QUERY_BLOCK]);
+            for (j, p) in planar.iter().enumerate() {
+                (u[j], v[j]) = (p.uv[0], p.uv[1]);
+            }
+            let ([x, y, z], jacobian) = self.directions_lanes(&u, &v);
+            let lookups = self.image.lookup_block(&u, &v, mode, wrap);
+            for j in 0..planar.len() {
+                let at = k * QUERY_BLOCK + j;
+                directions[at] = Vec3::new(x[j], y[j], z[j]);
+                jacobians[at] = jacobian[j];
+                let l = self.image.fetch(&lookups, j);
+                radiance[at] = [l[0] * scale, l[1] * scale, l[2] * scale];
+            }
         }
         let mut pdfs = [0.0f32; STAGED_BLOCK];
         self.bilinear_pdfs::<false>(d, &directions[..n], &mut pdfs[..n]);
@@ -215,7 +237,7 @@ impl EnvironmentLight {
                 LightSample {
                     direction: directions[k],
                     pdf,
-                    radiance: self.lookup(p.uv),
+                    radiance: radiance[k],
                     uv: p.uv,
                 }
             });
@@ -478,6 +500,17 @@ impl EnvironmentLight {
                 [0.0; QUERY_BLOCK],
                 [1.0; QUERY_BLOCK],
             ];
+            if let Ok(full) = <&[Vec3; QUERY_BLOCK]>::try_from(dirs) {
+                // A whole block as one array of coordinates, read with fixed
+                // strides: the compiler turns this into vector loads and shuffles.
+                // SAFETY: `Vec3` is `repr(C)` over three `f32`.
+                let flat: &[f32; 3 * QUERY_BLOCK] = unsafe { &*(full as *const _ as *const _) };
+                for i in 0..QUERY_BLOCK {
+                    (xyz[0][i], xyz[1][i], xyz[2][i]) =
+                        (flat[3 * i], flat[3 * i + 1], flat[3 * i + 2]);
+                }
+                return xyz;
+            }
             for (i, d) in dirs.iter().enumerate() {
                 (xyz[0][i], xyz[1][i], xyz[2][i]) = (d.x, d.y, d.z);
             }
@@ -582,10 +615,8 @@ impl EnvironmentLight {
 }
 
 /// [`Distribution2D::sample_continuous_hinted`] of a block of `ξ` (at most
-/// [`STAGED_BLOCK`]) in vector lanes, [`QUERY_BLOCK`] at a time, each stage run
-/// over the whole block before the next ([`Distribution2D::rows_lanes`]): the
-/// block's cache misses overlap. Bit for bit the single samples; `hint` hears
-/// each point as soon as it is placed.
+/// [`STAGED_BLOCK`]) in vector lanes ([`Distribution2D::staged_lanes`]), bit for
+/// bit; `hint` hears each point as soon as it is placed.
 #[inline(always)]
 fn inversion_block(
     d: &Distribution2D,
@@ -593,36 +624,22 @@ fn inversion_block(
     out: &mut [Sample2D],
     hint: impl Fn([f32; 2]),
 ) {
-    const LANES: usize = STAGED_BLOCK / QUERY_BLOCK;
-    assert!(
-        xi.len() == out.len() && xi.len() <= STAGED_BLOCK,
-        "bad block"
+    d.staged_lanes(
+        xi,
+        out,
+        #[inline(always)]
+        |rows, out| {
+            let s = d.finish_lanes(rows);
+            for (j, o) in out.iter_mut().enumerate() {
+                hint([s.u[j], s.v[j]]);
+                *o = Sample2D {
+                    uv: [s.u[j], s.v[j]],
+                    pdf: s.pdf[j],
+                    cell: [s.iu[j] as usize, s.iv[j] as usize],
+                };
+            }
+        },
     );
-    let mut rows = [None; LANES];
-    for (r, xi) in rows.iter_mut().zip(xi.chunks(QUERY_BLOCK)) {
-        let (mut xi0, mut xi1) = ([0.0f32; QUERY_BLOCK], [0.0f32; QUERY_BLOCK]);
-        for (j, x) in xi.iter().enumerate() {
-            (xi0[j], xi1[j]) = (x[0], x[1]);
-        }
-        let lanes = d.rows_lanes(&xi0, &xi1);
-        d.prefetch_guides(&lanes);
-        *r = Some(lanes);
-    }
-    for r in rows.iter_mut().flatten() {
-        d.bound_lanes(r);
-        d.prefetch_cdfs(r);
-    }
-    for (r, out) in rows.iter().flatten().zip(out.chunks_mut(QUERY_BLOCK)) {
-        let s = d.finish_lanes(r);
-        for (j, o) in out.iter_mut().enumerate() {
-            hint([s.u[j], s.v[j]]);
-            *o = Sample2D {
-                uv: [s.u[j], s.v[j]],
-                pdf: s.pdf[j],
-                cell: [s.iu[j] as usize, s.iv[j] as usize],
-            };
-        }
-    }
 }
 
 /// Directions per block in the batch queries' vectorized stage
