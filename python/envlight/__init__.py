@@ -11,6 +11,10 @@ the map's luminance, and answers in batches over numpy arrays (float32):
   sampling at shading points, in proportion to radiance × max(0, n·ω);
 - ``verify()``: the invariant checks, as ``envlight verify`` prints them.
 
+Large batch outputs (256 KiB and up) live in buffers that go back to a small
+cache when their arrays are freed, so that the next batch call does not pay for
+fresh pages (at most 8 buffers, 512 MiB); ``release_buffers()`` empties it.
+
 Frames (``frame=``): ``"z-up"`` is the library's (a map point ``(u, v)`` looks
 along ``(sin θ cos φ, sin θ sin φ, cos θ)`` with ``θ = π v``, ``φ = 2π u``);
 ``"y-up"`` is Mitsuba 3's envmap frame, ``(y, z, -x)`` of the z-up direction. The
@@ -26,6 +30,6 @@ u = 0, v = 0.5        (1, 0, 0)        (0, 0, -1)
 ====================  ===============  ===============
 """
 
-from ._native import EnvironmentLight, __version__
+from ._native import EnvironmentLight, __version__, release_buffers
 
-__all__ = ["EnvironmentLight", "__version__"]
+__all__ = ["EnvironmentLight", "__version__", "release_buffers"]

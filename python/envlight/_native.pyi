@@ -6,6 +6,9 @@ import numpy.typing as npt
 
 __version__: str
 
+def release_buffers() -> int:
+    """Frees the output buffers the batch calls keep for reuse; returns the bytes released."""
+
 _F32 = npt.NDArray[np.float32]
 _Sampler = Literal["inversion", "alias", "hierarchical"]
 _Density = Literal["piecewise-constant", "piecewise-bilinear"]

@@ -264,3 +264,40 @@ def test_real_map():
     d, p, _ = light.sample(uniform_u(10000))
     assert np.allclose(light.pdf(d), p, rtol=1e-3)
     assert 0.7 < light.efficiency < 0.9
+
+
+def test_pooled_outputs_are_independent_and_recycled():
+    """Big batch outputs come from recycled buffers: a live array is never
+    overwritten by a later call, a recycled buffer gives the same values as a
+    fresh one, missing samples are zeros in it, and release_buffers frees them."""
+    rgb = np.ones((32, 64, 3), np.float32)
+    rgb[20, 10] = 500.0
+    light = envlight.EnvironmentLight.from_array(rgb)
+    black = envlight.EnvironmentLight.from_array(np.zeros((32, 64, 3), np.float32))
+    n = 1 << 17  # above the pooled size for every output
+    rng = np.random.default_rng(3)
+    u1 = rng.random((n, 2), dtype=np.float32)
+    u2 = rng.random((n, 2), dtype=np.float32)
+    envlight.release_buffers()
+    d1, p1, l1 = light.sample(u1)
+    keep = (d1.copy(), p1.copy(), l1.copy())
+    d2, p2, l2 = light.sample(u2)  # must not reuse the live arrays' memory
+    for live, saved in zip((d1, p1, l1), keep):
+        np.testing.assert_array_equal(live, saved)
+    pdf1 = light.pdf(d1).copy()
+    rad1 = light.radiance(d1).copy()
+    del d1, p1, l1, d2, p2, l2
+    # Recycled buffers now, holding the previous calls' values: every output
+    # must be rewritten.
+    d3, p3, l3 = light.sample(u1)
+    for new, saved in zip((d3, p3, l3), keep):
+        np.testing.assert_array_equal(new, saved)
+    np.testing.assert_array_equal(light.pdf(d3), pdf1)
+    np.testing.assert_array_equal(light.radiance(d3), rad1)
+    del d3, p3, l3
+    # A black map samples nothing: zeros, not the recycled values.
+    d4, p4, l4 = black.sample(u1)
+    assert not np.any(d4) and not np.any(p4) and not np.any(l4)
+    del d4, p4, l4
+    assert envlight.release_buffers() > 0
+    assert envlight.release_buffers() == 0
