@@ -8,7 +8,7 @@ use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, radius_and_csc, EQUIRECT_JACOBIAN};
-use crate::math::{is_positive_finite, Vec3};
+use crate::math::{is_positive_finite, prefetch_ptr, Vec3};
 use rayon::prelude::*;
 
 impl EnvironmentLight {
@@ -524,6 +524,17 @@ impl EnvironmentLight {
         let mut next = blocks.next().map(|(d, o)| (transpose(d), o));
         let mut k = 0;
         while let Some(([x, y, z], out)) = next.take() {
+            // The directions a few blocks on start loading now: the stream's
+            // cache misses otherwise stall the transposition.
+            let ahead = (k + INPUT_AHEAD) * QUERY_BLOCK;
+            for line in 0..QUERY_BLOCK * std::mem::size_of::<Vec3>() / 64 {
+                prefetch_ptr(
+                    dirs.as_ptr()
+                        .wrapping_add(ahead)
+                        .cast::<u8>()
+                        .wrapping_add(64 * line),
+                );
+            }
             next = blocks.next().map(|(d, o)| (transpose(d), o));
             slots[k & 1] = Some((prepare(&self.to_uv_block(x, y, z)), out));
             if let Some((previous, previous_out)) = &mut slots[(k + 1) & 1] {
@@ -646,6 +657,10 @@ fn inversion_block(
 /// ([`EnvironmentLight::to_uv_block`]): enough for several vectors of the widest
 /// kind, few enough that the block's arrays stay in registers and L1.
 const QUERY_BLOCK: usize = 16;
+
+/// How many blocks ahead [`EnvironmentLight::uv_blocks`] asks for the input
+/// directions.
+const INPUT_AHEAD: usize = 8;
 
 /// A block of directions' image points (`u`, `v`) and reciprocal Jacobians,
 /// lane by lane.
