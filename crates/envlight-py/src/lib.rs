@@ -444,7 +444,7 @@ impl PyEnvironmentLight {
     }
 
     /// Draws the samples `0..n` with `draw` (given a range of sample indices and
-    /// an output slice for them, in the library's batch form), a chunk at a time
+    /// an output slice for them, in the library's batch form), a piece at a time
     /// into a small buffer, and lays them out as three flat arrays (directions in
     /// this light's frame); a missing sample is a zero direction with pdf 0 and
     /// radiance 0. Runs without the interpreter lock.
@@ -462,23 +462,31 @@ impl PyEnvironmentLight {
                 .zip(pdf.par_chunks_mut(CHUNK))
                 .zip(rgb.par_chunks_mut(3 * CHUNK))
                 .enumerate()
-                .for_each_init(Vec::new, |samples, (c, ((d, p), l))| {
-                    let start = c * CHUNK;
-                    samples.clear();
-                    samples.resize(p.len(), None);
-                    draw(start..start + p.len(), samples);
-                    for (k, s) in samples.iter().enumerate() {
-                        let (direction, pdf, radiance) = match s {
-                            Some(s) => (
-                                frame.z_up_to_frame(s.direction).to_array(),
-                                s.pdf,
-                                s.radiance,
-                            ),
-                            None => ([0.0; 3], 0.0, [0.0; 3]),
-                        };
-                        d[3 * k..3 * k + 3].copy_from_slice(&direction);
-                        p[k] = pdf;
-                        l[3 * k..3 * k + 3].copy_from_slice(&radiance);
+                .for_each(|(c, ((d, p), l))| {
+                    // Each chunk in pieces whose samples stay in the first-level
+                    // cache until they are laid out.
+                    let mut samples = [None; PIECE];
+                    let pieces = d
+                        .chunks_mut(3 * PIECE)
+                        .zip(p.chunks_mut(PIECE))
+                        .zip(l.chunks_mut(3 * PIECE));
+                    for (k, ((d, p), l)) in pieces.enumerate() {
+                        let start = c * CHUNK + k * PIECE;
+                        let samples = &mut samples[..p.len()];
+                        draw(start..start + p.len(), samples);
+                        for (k, s) in samples.iter().enumerate() {
+                            let (direction, pdf, radiance) = match s {
+                                Some(s) => (
+                                    frame.z_up_to_frame(s.direction).to_array(),
+                                    s.pdf,
+                                    s.radiance,
+                                ),
+                                None => ([0.0; 3], 0.0, [0.0; 3]),
+                            };
+                            d[3 * k..3 * k + 3].copy_from_slice(&direction);
+                            p[k] = pdf;
+                            l[3 * k..3 * k + 3].copy_from_slice(&radiance);
+                        }
                     }
                 });
             (dirs, pdf, rgb)
@@ -493,6 +501,9 @@ impl PyEnvironmentLight {
 
 /// Samples per parallel task when laying results out.
 const CHUNK: usize = 1 << 14;
+
+/// Samples drawn at a time within a task (20 KiB of samples).
+const PIECE: usize = 512;
 
 /// `values` (`3 N` floats) viewed mutably as `N` RGB triples.
 fn as_triples_mut(values: &mut [f32]) -> &mut [[f32; 3]] {
