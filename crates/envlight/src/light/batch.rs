@@ -334,7 +334,7 @@ impl EnvironmentLight {
             return self.bilinear_pdfs_located::<PREFETCH>(d, dirs, out);
         };
         let cells = [w as f64, h as f64];
-        self.uv_blocks(
+        self.uv_blocks::<true, _, _>(
             dirs,
             out,
             #[inline(always)]
@@ -368,7 +368,7 @@ impl EnvironmentLight {
         dirs: &[Vec3],
         out: &mut [f32],
     ) {
-        self.uv_blocks(
+        self.uv_blocks::<true, _, _>(
             dirs,
             out,
             #[inline(always)]
@@ -411,7 +411,7 @@ impl EnvironmentLight {
         prefetch: impl Fn(usize, usize),
         cell_pdf: impl Fn(usize, usize) -> f32,
     ) {
-        self.uv_blocks(
+        self.uv_blocks::<true, _, _>(
             dirs,
             out,
             #[inline(always)]
@@ -447,7 +447,7 @@ impl EnvironmentLight {
         prefetch: impl Fn(usize, usize),
         cell_pdfs: impl Fn(&[u32; QUERY_BLOCK], &[u32; QUERY_BLOCK]) -> [f32; QUERY_BLOCK],
     ) {
-        self.uv_blocks(
+        self.uv_blocks::<true, _, _>(
             dirs,
             out,
             #[inline(always)]
@@ -480,9 +480,10 @@ impl EnvironmentLight {
     /// needs and starts fetching the memory it will read; `finish` writes the
     /// results into the matching part of `out`, one block later: a block's cache
     /// misses are under way while the next block's angles are computed. The last
-    /// block is padded; `out` is as long as the real part.
+    /// block is padded; `out` is as long as the real part. With `INPUT_PREFETCH`
+    /// the input is fetched [`INPUT_AHEAD`] blocks ahead.
     #[inline(always)]
-    fn uv_blocks<O, P>(
+    fn uv_blocks<const INPUT_PREFETCH: bool, O, P>(
         &self,
         dirs: &[Vec3],
         out: &mut [O],
@@ -524,10 +525,18 @@ impl EnvironmentLight {
         let mut next = blocks.next().map(|(d, o)| (transpose(d), o));
         let mut k = 0;
         while let Some(([x, y, z], out)) = next.take() {
-            // The directions a few blocks on start loading now: the stream's
-            // cache misses otherwise stall the transposition.
+            // With `INPUT_PREFETCH`, the directions a few blocks on start loading
+            // now: the stream's cache misses otherwise stall the transposition of
+            // a pdf query (1.1-1.3x faster at 1k). A radiance query, whose texel
+            // prefetches fill the queue of outstanding misses, measured no faster
+            // with it on a 1k map and slower on 2k-4k ones.
             let ahead = (k + INPUT_AHEAD) * QUERY_BLOCK;
-            for line in 0..QUERY_BLOCK * std::mem::size_of::<Vec3>() / 64 {
+            let lines = if INPUT_PREFETCH {
+                QUERY_BLOCK * std::mem::size_of::<Vec3>() / 64
+            } else {
+                0
+            };
+            for line in 0..lines {
                 prefetch_ptr(
                     dirs.as_ptr()
                         .wrapping_add(ahead)
@@ -603,7 +612,7 @@ impl EnvironmentLight {
     /// [`Self::radiance_batch`] on one chunk, on the current thread.
     #[inline(always)]
     fn radiance_chunk(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
-        self.uv_blocks(
+        self.uv_blocks::<false, _, _>(
             dirs,
             out,
             #[inline(always)]
