@@ -102,11 +102,11 @@ class TableLight:
             nodes = np.zeros(1, np.float32)
         if self.jit:
             self.words = U(words)
-            self.radiance = F(radiance)
+            self.texels = F(radiance)
             self.nodes = F(nodes)
         else:
             self.words = words
-            self.radiance = radiance
+            self.texels = radiance
             self.nodes = nodes
         self.scale = p["scale"]
         self.black = p["black"] != 0
@@ -135,12 +135,12 @@ class TableLight:
         i = (y * self.p["image_width"] + x) * 3
         if self.jit:
             F = self.mi.Float
-            return (dr.gather(F, self.radiance, i, active), dr.gather(F, self.radiance, i + 1, active),
-                    dr.gather(F, self.radiance, i + 2, active))
+            return (dr.gather(F, self.texels, i, active), dr.gather(F, self.texels, i + 1, active),
+                    dr.gather(F, self.texels, i + 2, active))
         if not active:
             return (0.0, 0.0, 0.0)
         i = int(i)
-        return (float(self.radiance[i]), float(self.radiance[i + 1]), float(self.radiance[i + 2]))
+        return (float(self.texels[i]), float(self.texels[i + 1]), float(self.texels[i + 2]))
 
     def _next_up(self, x):
         if self.jit:

@@ -1,0 +1,228 @@
+"""envlight inside Mitsuba 3: the emitter type ``"envlight"``.
+
+``register()`` adds it for the active Mitsuba variant; a scene then uses it where it
+would use ``envmap``::
+
+    import mitsuba as mi
+    import envlight.mitsuba
+    mi.set_variant("llvm_ad_rgb")
+    envlight.mitsuba.register()
+    scene = mi.load_dict({..., "sky": {"type": "envlight", "filename": "sky.exr"}})
+
+Parameters, in Mitsuba's style:
+
+- ``filename`` (or ``bitmap``, a ``mi.Bitmap``): a latitude-longitude map, read by
+  Mitsuba (its file resolver and formats) as linear RGB;
+- ``scale`` (float, 1): radiance multiplier; ``to_world`` (transform): as ``envmap``'s,
+  the map's frame is ``envmap``'s (y up);
+- ``sampling``: ``"light"`` (default, density ∝ the map's luminance) or ``"product"``
+  (∝ luminance × max(0, n·ω) at the interaction's shading normal);
+- envlight's options: ``sampler`` (``"inversion"``), ``density``
+  (``"piecewise-constant"``, ``"piecewise-bilinear"``), ``mapping``
+  (``"equirectangular"``, ``"equal-area"``) and ``lookup`` (``"node"``, the default,
+  ``envmap``'s convention: rows as nodes from pole to pole; ``"bilinear"``, texel
+  centres; ``"nearest"``).
+
+Every query (``sample_direction``, ``pdf_direction``, ``eval``, ``eval_direction``)
+is Dr.Jit code over the light's exported tables (docs/gpu-tables.md), so it traces
+into Mitsuba's kernels in symbolic mode; ``register()`` changes no Dr.Jit flag.
+RGB variants only (``scalar_rgb``, ``llvm_*_rgb``, ``cuda_*_rgb``).
+"""
+
+import os
+
+import numpy as np
+
+from . import _native
+from ._drjit_tables import TableLight
+
+__all__ = ["register"]
+
+SAMPLINGS = ("light", "product")
+SAMPLERS = ("inversion",)
+DENSITIES = ("piecewise-constant", "piecewise-bilinear")
+MAPPINGS = ("equirectangular", "equal-area")
+LOOKUPS = ("node", "bilinear", "nearest")
+
+_classes = {}
+
+
+def _mitsuba():
+    try:
+        import mitsuba
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("envlight.mitsuba needs Mitsuba 3: pip install mitsuba") from e
+    return mitsuba
+
+
+def register():
+    """Registers the emitter type ``"envlight"`` for Mitsuba's active variant.
+
+    Raises RuntimeError when no variant is set or the variant is not an RGB one."""
+    mi = _mitsuba()
+    variant = mi.variant()
+    if variant is None:
+        raise RuntimeError("envlight.mitsuba.register(): no Mitsuba variant is set; call mitsuba.set_variant() first")
+    if not mi.is_rgb or mi.is_polarized:
+        raise RuntimeError(
+            f'envlight.mitsuba.register(): variant "{variant}" is not supported; '
+            "the envlight emitter runs in RGB variants (scalar_rgb, llvm_ad_rgb, cuda_ad_rgb)"
+        )
+    cls = _classes.get(variant)
+    if cls is None:
+        cls = _classes[variant] = _emitter_class(mi)
+    mi.register_emitter("envlight", lambda props: cls(props))
+
+
+def _choice(props, name, choices, default):
+    if not props.has_property(name):
+        return default
+    value = props[name]
+    if not isinstance(value, str) or value not in choices:
+        allowed = ", ".join(f'"{c}"' for c in choices)
+        raise ValueError(f'envlight emitter: parameter "{name}" must be one of {allowed}, got {value!r}')
+    return value
+
+
+def _load_rgb(mi, props):
+    """The map as an (H, W, 3) float32 array of linear RGB, and its name."""
+    has_file = props.has_property("filename")
+    has_bitmap = props.has_property("bitmap")
+    if has_file and has_bitmap:
+        raise ValueError('envlight emitter: cannot specify both "bitmap" and "filename"')
+    if has_bitmap:
+        bitmap = props["bitmap"]
+        if not isinstance(bitmap, mi.Bitmap):
+            raise TypeError('envlight emitter: property "bitmap" must be a mitsuba.Bitmap')
+        name = "<Bitmap>"
+    elif has_file:
+        filename = str(props["filename"])
+        path = str(mi.Thread.thread().file_resolver().resolve(filename))
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f'envlight emitter: environment map "{filename}" not found')
+        try:
+            bitmap = mi.Bitmap(path)
+        except Exception as e:
+            raise OSError(f'envlight emitter: cannot read environment map "{filename}": {e}') from e
+        name = filename
+    else:
+        raise ValueError('envlight emitter: a "filename" (or "bitmap") parameter is required')
+    bitmap = bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+    rgb = np.array(bitmap, dtype=np.float32, copy=True).reshape(bitmap.height(), bitmap.width(), 3)
+    if rgb.shape[0] < 2 or rgb.shape[1] < 2:
+        raise ValueError(f'envlight emitter: "{name}": the environment map must be at least 2x2 pixels, got '
+                         f"{rgb.shape[1]}x{rgb.shape[0]}")
+    return rgb, name
+
+
+def _clamp_negative(mi, rgb, name):
+    """Negative texels (lossy codecs leave them) clamped to 0, with a warning that
+    counts them (DESIGN.md §5); NaN and infinite texels are left for the light to refuse."""
+    negative = (rgb < 0).any(axis=2)
+    count = int(negative.sum())
+    if count:
+        mi.Log(mi.LogLevel.Warn, f'envlight emitter: "{name}": {count} texels with negative channels clamped to 0 '
+               f"(most negative {float(rgb.min()):g})")
+        rgb = np.where(rgb < 0, np.float32(0), rgb)
+    return rgb
+
+
+def _emitter_class(mi):
+    import drjit as dr
+
+    class EnvlightEmitter(mi.Emitter):
+        """envlight's environment light as a Mitsuba emitter (see envlight.mitsuba)."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
+            self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
+            self.options = {
+                "sampler": _choice(props, "sampler", SAMPLERS, "inversion"),
+                "density": _choice(props, "density", DENSITIES, "piecewise-constant"),
+                "mapping": _choice(props, "mapping", MAPPINGS, "equirectangular"),
+                "lookup": _choice(props, "lookup", LOOKUPS, "bilinear"),
+            }
+            scale = props.get("scale", 1.0)
+            if not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 0:
+                raise ValueError(f'envlight emitter: "scale" must be a finite number >= 0, got {scale!r}')
+            rgb, self.name = _load_rgb(mi, props)
+            rgb = _clamp_negative(mi, rgb, self.name)
+            self.m_scale = mi.Float(float(scale))
+            self.m_data = mi.TensorXf(rgb)
+            self.bsphere_center = mi.Point3f(0.0)
+            self.bsphere_radius = mi.Float(1.0)
+            self._build(rgb)
+
+        def _build(self, rgb):
+            """Builds the CPU light over rgb and the Dr.Jit evaluator of its tables."""
+            try:
+                self.light = _native.EnvironmentLight.from_array(np.ascontiguousarray(rgb, np.float32), **self.options)
+                self.tables = TableLight(self.light.gpu_tables(), mi)
+            except ValueError as e:
+                raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
+
+        # -- frames: Mitsuba's envmap frame (y up) ↔ envlight's (z up) ---------------
+
+        def _to_light(self, d_world):
+            d = self.world_transform().inverse() @ d_world
+            # envmap's local (x, y, z) is envlight's (y, z, −x).
+            return -d.z, d.x, d.y
+
+        def _from_light(self, x, y, z):
+            return self.world_transform() @ mi.Vector3f(y, z, -x)
+
+        # -- queries ----------------------------------------------------------------------
+
+        def sample_direction(self, it, sample, active=True):
+            (x, y, z), pdf, rgb, valid = self.tables.sample(sample.x, sample.y)
+            d = self._from_light(x, y, z)
+            active = active & valid
+            radius = dr.maximum(self.bsphere_radius, dr.norm(it.p - self.bsphere_center))
+            dist = 2.0 * radius
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.p = it.p + d * dist
+            ds.n = -d
+            ds.time = it.time
+            ds.pdf = dr.select(active, pdf, 0.0)
+            ds.delta = False
+            ds.emitter = mi.EmitterPtr(self)
+            ds.d = d
+            ds.dist = dist
+            weight = mi.Color3f(rgb[0], rgb[1], rgb[2]) * (self.m_scale / dr.select(active, pdf, 1.0))
+            return ds, dr.select(active, weight, 0.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            pdf = self.tables.pdf(*self._to_light(ds.d))
+            return dr.select(active, pdf, 0.0)
+
+        def _radiance(self, d_world, active):
+            r, g, b = self.tables.radiance(*self._to_light(d_world))
+            return dr.select(active, mi.Color3f(r, g, b) * self.m_scale, 0.0)
+
+        def eval(self, si, active=True):
+            return self._radiance(-si.wi, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self._radiance(ds.d, active)
+
+        def set_scene(self, scene):
+            bbox = scene.bbox()
+            if bbox.valid():
+                sphere = bbox.bounding_sphere()
+                eps = float(mi.math.RayEpsilon)
+                self.bsphere_center = mi.Point3f(sphere.center)
+                self.bsphere_radius = mi.Float(max(eps, float(sphere.radius) * (1.0 + eps)))
+            else:
+                self.bsphere_center = mi.Point3f(0.0)
+                self.bsphere_radius = mi.Float(float(mi.math.RayEpsilon))
+
+        def bbox(self):
+            return mi.ScalarBoundingBox3f()
+
+        def to_string(self):
+            h, w = self.m_data.shape[0], self.m_data.shape[1]
+            return (f'EnvlightEmitter[filename="{self.name}", res={w}x{h}, sampling="{self.sampling}", '
+                    + ", ".join(f'{k}="{v}"' for k, v in self.options.items()) + "]")
+
+    return EnvlightEmitter
