@@ -537,12 +537,20 @@ class TableLight:
                     0.5 * (self._node(iv, h) + self._node(iv + 1, h)))
         return ((self._f(iu) + 0.5) / float(p["table_width"]), (self._f(iv) + 0.5) / float(p["table_height"]))
 
-    def sample(self, xi0, xi1):
+    def sample(self, xi0, xi1, outer=None):
         """Draws a direction for ξ ∈ [0, 1)²: ((x, y, z) world, pdf per steradian,
         (r, g, b), valid). No sample (black light, a pole, a zero-density cell):
-        valid False, pdf and radiance 0, the direction of the image point ξ."""
+        valid False, pdf and radiance 0, the direction of the image point ξ.
+
+        outer: an optional pair (to_world, to_light) of functions of (x, y, z) that
+        a caller puts around the tables' own frame (a renderer's transform, rounded
+        to its storage type). The direction is settled into its cell through them,
+        so the caller's pdf(to_light(d)) finds the sampled cell too."""
+        if outer is None:
+            outer = (lambda x, y, z: (x, y, z), lambda x, y, z: (x, y, z))
+        outer_to_world, outer_to_light = outer
         if self.black:
-            d = self.to_world(*self.uv_to_local(xi0, xi1))
+            d = outer_to_world(*self.to_world(*self.uv_to_local(xi0, xi1)))
             zero = 0.0 * xi0
             return d, zero, (zero, zero, zero), xi0 != xi0
         if self.p["density"] == DENSITY_BILINEAR:
@@ -552,8 +560,8 @@ class TableLight:
         cu, cv = self._centre_of(iu, iv)
 
         def settled(u, v):
-            d = self.to_world(*self.uv_to_local(u, v))
-            bu, bv, inv_j = self.local_to_uv(*self.to_light(*d))
+            d = outer_to_world(*self.to_world(*self.uv_to_local(u, v)))
+            bu, bv, inv_j = self.local_to_uv(*self.to_light(*outer_to_light(*d)))
             return d, bu, bv, inv_j
 
         d, bu, bv, inv_j = settled(u, v)

@@ -29,6 +29,7 @@ into Mitsuba's kernels in symbolic mode; ``register()`` changes no Dr.Jit flag.
 RGB variants only (``scalar_rgb``, ``llvm_*_rgb``, ``cuda_*_rgb``).
 """
 
+import importlib
 import os
 
 import numpy as np
@@ -75,7 +76,7 @@ def register():
 
 
 def _choice(props, name, choices, default):
-    if not props.has_property(name):
+    if name not in props:
         return default
     value = props[name]
     if not isinstance(value, str) or value not in choices:
@@ -86,8 +87,8 @@ def _choice(props, name, choices, default):
 
 def _load_rgb(mi, props):
     """The map as an (H, W, 3) float32 array of linear RGB, and its name."""
-    has_file = props.has_property("filename")
-    has_bitmap = props.has_property("bitmap")
+    has_file = ("filename" in props)
+    has_bitmap = ("bitmap" in props)
     if has_file and has_bitmap:
         raise ValueError('envlight emitter: cannot specify both "bitmap" and "filename"')
     if has_bitmap:
@@ -97,7 +98,8 @@ def _load_rgb(mi, props):
         name = "<Bitmap>"
     elif has_file:
         filename = str(props["filename"])
-        path = str(mi.Thread.thread().file_resolver().resolve(filename))
+        resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+        path = str(resolver.resolve(filename))
         if not os.path.isfile(path):
             raise FileNotFoundError(f'envlight emitter: environment map "{filename}" not found')
         try:
@@ -130,7 +132,13 @@ def _clamp_negative(mi, rgb, name):
 def _emitter_class(mi):
     import drjit as dr
 
-    class EnvlightEmitter(mi.Emitter):
+    # The variant's own module: `mitsuba.X` follows whichever variant is active
+    # when it is read, but an emitter must keep the types of the variant it was
+    # registered for.
+    mv = importlib.import_module(f"mitsuba.{mi.variant()}")
+    emitter_ptr = getattr(mv, "EmitterPtr", None)
+
+    class EnvlightEmitter(mv.Emitter):
         """envlight's environment light as a Mitsuba emitter (see envlight.mitsuba)."""
 
         def __init__(self, props):
@@ -148,17 +156,17 @@ def _emitter_class(mi):
                 raise ValueError(f'envlight emitter: "scale" must be a finite number >= 0, got {scale!r}')
             rgb, self.name = _load_rgb(mi, props)
             rgb = _clamp_negative(mi, rgb, self.name)
-            self.m_scale = mi.Float(float(scale))
-            self.m_data = mi.TensorXf(rgb)
-            self.bsphere_center = mi.Point3f(0.0)
-            self.bsphere_radius = mi.Float(1.0)
+            self.m_scale = mv.Float(float(scale))
+            self.m_data = mv.TensorXf(rgb)
+            self.bsphere_center = mv.Point3f(0.0)
+            self.bsphere_radius = mv.Float(1.0)
             self._build(rgb)
 
         def _build(self, rgb):
             """Builds the CPU light over rgb and the Dr.Jit evaluator of its tables."""
             try:
                 self.light = _native.EnvironmentLight.from_array(np.ascontiguousarray(rgb, np.float32), **self.options)
-                self.tables = TableLight(self.light.gpu_tables(), mi)
+                self.tables = TableLight(self.light.gpu_tables(), mv)
             except ValueError as e:
                 raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
 
@@ -170,26 +178,41 @@ def _emitter_class(mi):
             return -d.z, d.x, d.y
 
         def _from_light(self, x, y, z):
-            return self.world_transform() @ mi.Vector3f(y, z, -x)
+            return self.world_transform() @ mv.Vector3f(y, z, -x)
+
+        def _frames(self):
+            """(to_world, to_light) over component triples, for TableLight.sample: the
+            world direction as a Vector3f stores it, so that pdf_direction of a
+            sampled direction finds the cell it was drawn in."""
+
+            def to_world(x, y, z):
+                d = self._from_light(x, y, z)
+                return d.x, d.y, d.z
+
+            def to_light(x, y, z):
+                return self._to_light(mv.Vector3f(x, y, z))
+
+            return to_world, to_light
 
         # -- queries ----------------------------------------------------------------------
 
         def sample_direction(self, it, sample, active=True):
-            (x, y, z), pdf, rgb, valid = self.tables.sample(sample.x, sample.y)
-            d = self._from_light(x, y, z)
+            (x, y, z), pdf, rgb, valid = self.tables.sample(sample.x, sample.y, self._frames())
+            d = mv.Vector3f(x, y, z)
             active = active & valid
             radius = dr.maximum(self.bsphere_radius, dr.norm(it.p - self.bsphere_center))
             dist = 2.0 * radius
-            ds = dr.zeros(mi.DirectionSample3f)
+            ds = mv.DirectionSample3f()
             ds.p = it.p + d * dist
+            ds.uv = mv.Point2f(0.0)
             ds.n = -d
             ds.time = it.time
             ds.pdf = dr.select(active, pdf, 0.0)
             ds.delta = False
-            ds.emitter = mi.EmitterPtr(self)
+            ds.emitter = emitter_ptr(self) if emitter_ptr is not None else self
             ds.d = d
             ds.dist = dist
-            weight = mi.Color3f(rgb[0], rgb[1], rgb[2]) * (self.m_scale / dr.select(active, pdf, 1.0))
+            weight = mv.Color3f(rgb[0], rgb[1], rgb[2]) * (self.m_scale / dr.select(active, pdf, 1.0))
             return ds, dr.select(active, weight, 0.0)
 
         def pdf_direction(self, it, ds, active=True):
@@ -198,7 +221,7 @@ def _emitter_class(mi):
 
         def _radiance(self, d_world, active):
             r, g, b = self.tables.radiance(*self._to_light(d_world))
-            return dr.select(active, mi.Color3f(r, g, b) * self.m_scale, 0.0)
+            return dr.select(active, mv.Color3f(r, g, b) * self.m_scale, 0.0)
 
         def eval(self, si, active=True):
             return self._radiance(-si.wi, active)
@@ -211,14 +234,14 @@ def _emitter_class(mi):
             if bbox.valid():
                 sphere = bbox.bounding_sphere()
                 eps = float(mi.math.RayEpsilon)
-                self.bsphere_center = mi.Point3f(sphere.center)
-                self.bsphere_radius = mi.Float(max(eps, float(sphere.radius) * (1.0 + eps)))
+                self.bsphere_center = mv.Point3f(sphere.center)
+                self.bsphere_radius = mv.Float(max(eps, float(sphere.radius) * (1.0 + eps)))
             else:
-                self.bsphere_center = mi.Point3f(0.0)
-                self.bsphere_radius = mi.Float(float(mi.math.RayEpsilon))
+                self.bsphere_center = mv.Point3f(0.0)
+                self.bsphere_radius = mv.Float(float(mi.math.RayEpsilon))
 
         def bbox(self):
-            return mi.ScalarBoundingBox3f()
+            return mv.ScalarBoundingBox3f()
 
         def to_string(self):
             h, w = self.m_data.shape[0], self.m_data.shape[1]
