@@ -213,7 +213,7 @@ impl Quadrature {
         }
         let split = (self.nv / (2 * h - 2)).max(1);
         let edge = |n: usize| {
-            if n % 2 == 0 {
+            if n.is_multiple_of(2) {
                 (n / 2) as f64 / (h - 1) as f64
             } else {
                 n.div_ceil(2) as f64 / h as f64
