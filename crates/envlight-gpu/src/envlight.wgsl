@@ -766,7 +766,7 @@ fn lookup(uv: vec2<f32>) -> vec3<f32> {
     let w = params.image_width;
     let h = params.image_height;
     let periodic_u = params.mapping != MAPPING_EQUAL_AREA;
-    if params.lookup != LOOKUP_BILINEAR {
+    if params.lookup != LOOKUP_BILINEAR && params.lookup != LOOKUP_NODE {
         var u = uv.x;
         if periodic_u {
             u = periodic(u);
