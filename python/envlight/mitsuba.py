@@ -15,8 +15,9 @@ Parameters, in Mitsuba's style:
   Mitsuba (its file resolver and formats) as linear RGB;
 - ``scale`` (float, 1): radiance multiplier; ``to_world`` (transform): as ``envmap``'s,
   the map's frame is ``envmap``'s (y up);
-- ``sampling``: ``"light"`` (default, density ∝ the map's luminance) or ``"product"``
-  (∝ luminance × max(0, n·ω) at the interaction's shading normal);
+- ``sampling``: ``"light"`` (the default and, for now, the only one: density ∝ the
+  map's importance; ``"product"``, light × cos⁺ at the interaction's normal, is
+  refused with an error until the product tables are exported);
 - envlight's options: ``sampler`` (``"inversion"``), ``density``
   (``"piecewise-constant"``, ``"piecewise-bilinear"``), ``mapping``
   (``"equirectangular"``, ``"equal-area"``) and ``lookup`` (``"node"``, the default,
@@ -39,7 +40,7 @@ from ._drjit_tables import TableLight
 
 __all__ = ["register"]
 
-SAMPLINGS = ("light", "product")
+SAMPLINGS = ("light",)
 SAMPLERS = ("inversion",)
 DENSITIES = ("piecewise-constant", "piecewise-bilinear")
 MAPPINGS = ("equirectangular", "equal-area")
@@ -144,12 +145,17 @@ def _emitter_class(mi):
         def __init__(self, props):
             super().__init__(props)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
+            if props.get("sampling", "light") == "product":
+                raise ValueError(
+                    'envlight emitter: sampling "product" is not available yet in the Mitsuba emitter '
+                    '(the product tables are not exported to Dr.Jit); use sampling "light"'
+                )
             self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
             self.options = {
                 "sampler": _choice(props, "sampler", SAMPLERS, "inversion"),
                 "density": _choice(props, "density", DENSITIES, "piecewise-constant"),
                 "mapping": _choice(props, "mapping", MAPPINGS, "equirectangular"),
-                "lookup": _choice(props, "lookup", LOOKUPS, "bilinear"),
+                "lookup": _choice(props, "lookup", LOOKUPS, "node"),
             }
             scale = props.get("scale", 1.0)
             if not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 0:

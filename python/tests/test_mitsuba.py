@@ -128,6 +128,8 @@ CONFIGS = [
     {"lookup": "nearest"},
     {"rotate": 37.0, "scale": 2.5},
     {"table_width": 16},
+    {"lookup": "node"},
+    {"lookup": "node", "rotate": 80.0},
 ]
 
 
@@ -182,7 +184,7 @@ def test_emitter_queries_equal_the_cpu_in_mitsubas_frame(variant):
     axis = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
     rotation = mi.ScalarTransform4f().rotate(axis.tolist(), 50.0)
     em = emitter(rgb, scale=3.0, to_world=rotation)
-    cpu = envlight.EnvironmentLight.from_array(rgb, frame="y-up", scale=3.0, lookup="bilinear")
+    cpu = envlight.EnvironmentLight.from_array(rgb, frame="y-up", scale=3.0, lookup="node")
     m = np.array(rotation.matrix, dtype=np.float64)[:3, :3]
     n = 2000 if variant != "scalar_rgb" else 100
     rng = np.random.default_rng(11)
@@ -335,7 +337,9 @@ def test_scalar_render_agrees_with_llvm(sunrise):
         ({"filename": "no/such/sky.exr"}, 'environment map "no/such/sky.exr" not found'),
         ({}, 'a "filename" \\(or "bitmap"\\) parameter is required'),
         ({"filename": "x.exr", "bitmap": "bitmap"}, 'cannot specify both "bitmap" and "filename"'),
-        ({"bitmap": "bitmap", "sampling": "bsdf"}, 'parameter "sampling" must be one of "light", "product"'),
+        ({"bitmap": "bitmap", "sampling": "bsdf"}, 'parameter "sampling" must be one of "light"'),
+        ({"bitmap": "bitmap", "sampling": "product"}, 'sampling "product" is not available yet'),
+        ({"bitmap": "bitmap", "density": "piecewise-bilinear"}, "node lookup needs the piecewise-constant density"),
         ({"bitmap": "bitmap", "sampler": "alias"}, 'parameter "sampler" must be one of "inversion"'),
         ({"bitmap": "bitmap", "density": "smooth"}, 'parameter "density"'),
         ({"bitmap": "bitmap", "scale": -1.0}, '"scale" must be a finite number >= 0'),
