@@ -162,29 +162,65 @@ def _emitter_class(mi):
                 raise ValueError(f'envlight emitter: "scale" must be a finite number >= 0, got {scale!r}')
             rgb, self.name = _load_rgb(mi, props)
             rgb = _clamp_negative(mi, rgb, self.name)
-            self.m_scale = mv.Float(float(scale))
+            # Scalar variants' Float is a Python float, which traverse() cannot
+            # update in place: a one-element array there.
+            jit = dr.is_jit_v(mv.Float)
+            self.m_scale = mv.Float(float(scale)) if jit else dr.scalar.ArrayXf([float(scale)])
             self.m_data = mv.TensorXf(rgb)
+            # The emitter's own copy of to_world (read by Mitsuba's base class), so
+            # that traverse() can expose it and an update reaches the queries.
+            self.m_to_world = self.world_transform()
             self.bsphere_center = mv.Point3f(0.0)
             self.bsphere_radius = mv.Float(1.0)
             self._build(rgb)
 
         def _build(self, rgb):
-            """Builds the CPU light over rgb and the Dr.Jit evaluator of its tables."""
+            """Builds the CPU light over rgb and the Dr.Jit evaluator of its tables.
+            In JIT variants the radiance is read from ``m_data`` itself, so Dr.Jit
+            differentiates eval() with respect to the map (the sampling tables are
+            constants, as envmap's are)."""
             try:
                 self.light = _native.EnvironmentLight.from_array(np.ascontiguousarray(rgb, np.float32), **self.options)
                 self.tables = TableLight(self.light.gpu_tables(), mv)
             except ValueError as e:
                 raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
+            if self.tables.jit:
+                self.tables.texels = self.m_data.array
+
+        def traverse(self, callback):
+            super().traverse(callback)
+            callback.put("scale", self.m_scale, mi.ParamFlags.Differentiable)
+            callback.put("data", self.m_data, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
+            callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys=[]):
+            """A new map (``data``) rebuilds the light and its tables (checked as a
+            new file would be); ``scale`` and ``to_world`` are read as they are."""
+            if not keys or "data" in keys:
+                shape = tuple(self.m_data.shape)
+                if len(shape) != 3 or shape[2] != 3:
+                    raise ValueError(f"envlight emitter: data has shape {shape}, expected (height, width, 3)")
+                if shape[0] < 2 or shape[1] < 2:
+                    raise ValueError(f"envlight emitter: data is {shape[1]}x{shape[0]}, at least 2x2 is needed")
+                rgb = np.array(self.m_data, dtype=np.float32).reshape(shape)
+                clamped = _clamp_negative(mi, rgb, self.name)
+                if clamped is not rgb:
+                    self.m_data = mv.TensorXf(clamped)
+                self._build(clamped)
+            super().parameters_changed(keys)
+
+        def _scale(self):
+            return self.m_scale if self.tables.jit else float(self.m_scale[0])
 
         # -- frames: Mitsuba's envmap frame (y up) ↔ envlight's (z up) ---------------
 
         def _to_light(self, d_world):
-            d = self.world_transform().inverse() @ d_world
+            d = self.m_to_world.inverse() @ d_world
             # envmap's local (x, y, z) is envlight's (y, z, −x).
             return -d.z, d.x, d.y
 
         def _from_light(self, x, y, z):
-            return self.world_transform() @ mv.Vector3f(y, z, -x)
+            return self.m_to_world @ mv.Vector3f(y, z, -x)
 
         def _frames(self):
             """(to_world, to_light) over component triples, for TableLight.sample: the
@@ -218,7 +254,7 @@ def _emitter_class(mi):
             ds.emitter = emitter_ptr(self) if emitter_ptr is not None else self
             ds.d = d
             ds.dist = dist
-            weight = mv.Color3f(rgb[0], rgb[1], rgb[2]) * (self.m_scale / dr.select(active, pdf, 1.0))
+            weight = mv.Color3f(rgb[0], rgb[1], rgb[2]) * (self._scale() / dr.select(active, pdf, 1.0))
             return ds, dr.select(active, weight, 0.0)
 
         def pdf_direction(self, it, ds, active=True):
@@ -227,7 +263,7 @@ def _emitter_class(mi):
 
         def _radiance(self, d_world, active):
             r, g, b = self.tables.radiance(*self._to_light(d_world))
-            return dr.select(active, mv.Color3f(r, g, b) * self.m_scale, 0.0)
+            return dr.select(active, mv.Color3f(r, g, b) * self._scale(), 0.0)
 
         def eval(self, si, active=True):
             return self._radiance(-si.wi, active)
