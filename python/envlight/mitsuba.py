@@ -170,8 +170,6 @@ def _emitter_class(mi):
             # The emitter's own copy of to_world (read by Mitsuba's base class), so
             # that traverse() can expose it and an update reaches the queries.
             self.m_to_world = self.world_transform()
-            self.bsphere_center = mv.Point3f(0.0)
-            self.bsphere_radius = mv.Float(1.0)
             self._build(rgb)
 
         def _build(self, rgb):
@@ -242,8 +240,11 @@ def _emitter_class(mi):
             (x, y, z), pdf, rgb, valid = self.tables.sample(sample.x, sample.y, self._frames())
             d = mv.Vector3f(x, y, z)
             active = active & valid
-            radius = dr.maximum(self.bsphere_radius, dr.norm(it.p - self.bsphere_center))
-            dist = 2.0 * radius
+            # Mitsuba does not pass the scene to a Python emitter (set_scene is not
+            # called), so the shadow ray's end is put far beyond any scene instead
+            # of on its bounding sphere: 10⁶ times the point's distance from the
+            # origin (+1); the direction of p + d·dist − p keeps f32's precision.
+            dist = 1e6 * (1.0 + dr.norm(it.p))
             ds = mv.DirectionSample3f()
             ds.p = it.p + d * dist
             ds.uv = mv.Point2f(0.0)
@@ -256,6 +257,28 @@ def _emitter_class(mi):
             ds.dist = dist
             weight = mv.Color3f(rgb[0], rgb[1], rgb[2]) * (self._scale() / dr.select(active, pdf, 1.0))
             return ds, dr.select(active, weight, 0.0)
+
+        def sample_ray(self, time, wavelength_sample, sample2, sample3, active=True):
+            # A ray from the scene's bounding disc needs the scene's bounds, which
+            # Mitsuba does not give a Python emitter: refuse rather than guess.
+            raise NotImplementedError(
+                "envlight emitter: sample_ray (light tracing, e.g. the ptracer integrator) is not "
+                "supported: Mitsuba does not pass the scene's bounds to a Python emitter; use path, "
+                "direct or volpath"
+            )
+
+        def sample_wavelengths(self, si, sample, active=True):
+            """RGB variants sample no wavelength: an empty set, weighted by the
+            radiance arriving along ``-si.wi`` (as ``eval``)."""
+            return dr.zeros(type(si.wavelengths)), self._radiance(-si.wi, active)
+
+        def sample_position(self, time, sample, active=True):
+            # An environment has no position to sample. In JIT variants Dr.Jit's
+            # recording of virtual calls may call this without using the result,
+            # so it must not raise there (as envmap does).
+            if self.tables.jit:
+                return dr.zeros(mv.PositionSample3f), dr.nan
+            raise NotImplementedError("envlight emitter: sample_position() is not defined for an environment")
 
         def pdf_direction(self, it, ds, active=True):
             pdf = self.tables.pdf(*self._to_light(ds.d))
@@ -270,17 +293,6 @@ def _emitter_class(mi):
 
         def eval_direction(self, it, ds, active=True):
             return self._radiance(ds.d, active)
-
-        def set_scene(self, scene):
-            bbox = scene.bbox()
-            if bbox.valid():
-                sphere = bbox.bounding_sphere()
-                eps = float(mi.math.RayEpsilon)
-                self.bsphere_center = mv.Point3f(sphere.center)
-                self.bsphere_radius = mv.Float(max(eps, float(sphere.radius) * (1.0 + eps)))
-            else:
-                self.bsphere_center = mv.Point3f(0.0)
-                self.bsphere_radius = mv.Float(float(mi.math.RayEpsilon))
 
         def bbox(self):
             return mv.ScalarBoundingBox3f()

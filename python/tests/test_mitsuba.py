@@ -249,7 +249,7 @@ def test_register_changes_no_flag():
 def scene(sky_emitter, spp, integrator="path", width=48, height=32):
     T = mi.ScalarTransform4f
     integ = {"type": integrator}
-    if integrator == "path":
+    if integrator in ("path", "volpath"):
         integ["max_depth"] = 4
     return mi.load_dict({
         "type": "scene",
@@ -301,7 +301,7 @@ def sunrise():
     return str(SUNRISE)
 
 
-@pytest.mark.parametrize("integrator", ["path", "direct"])
+@pytest.mark.parametrize("integrator", ["path", "direct", "volpath"])
 def test_image_agrees_with_envmap(sunrise, integrator):
     llvm()
     rotation = mi.ScalarTransform4f().rotate([0, 1, 0], 70.0)
@@ -315,6 +315,49 @@ def test_image_agrees_with_envmap(sunrise, integrator):
     # The same test rejects a radiance 3% too bright.
     brighter = renders(scene(dict(light, scale=1.03), 16, integrator), [200 + s for s in seeds])
     assert abs(agreement(brighter, envmap)[0]) > 3
+
+
+def test_shadow_rays_reach_far_occluders(sunrise):
+    """A roof 40 units above a small scene shadows it from the sky above: the
+    emitter's shadow rays must reach it (a ray ending on a small sphere around the
+    shading point would not), as envmap's do."""
+    llvm()
+    T = mi.ScalarTransform4f
+
+    def roofed(sky):
+        return mi.load_dict({
+            "type": "scene",
+            "integrator": {"type": "direct"},
+            "sensor": {
+                "type": "perspective", "fov": 40,
+                "to_world": T().look_at(origin=[0, 3, 3], target=[0, 0, 0], up=[0, 1, 0]),
+                "film": {"type": "hdrfilm", "width": 24, "height": 16, "rfilter": {"type": "box"}},
+                "sampler": {"type": "independent", "sample_count": 32},
+            },
+            "ground": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(2),
+                       "bsdf": {"type": "diffuse"}},
+            "roof": {"type": "rectangle", "to_world": T().translate([0, 40, 0]).rotate([1, 0, 0], 90).scale(400),
+                     "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}}},
+            "sky": sky,
+        })
+
+    seeds = range(6)
+    envmap = renders(roofed({"type": "envmap", "filename": sunrise}), seeds)
+    ours = renders(roofed({"type": "envlight", "filename": sunrise}), [100 + s for s in seeds])
+    mean_z, beyond = agreement(ours, envmap)
+    assert abs(mean_z) < 3 and beyond <= 0.05, (mean_z, beyond)
+
+
+def test_light_tracing_is_refused_with_a_message(sunrise):
+    llvm()
+    sc = scene({"type": "envlight", "filename": sunrise}, 4, "ptracer", 8, 8)
+    with pytest.raises(Exception) as info:
+        mi.render(sc)
+    chain, e = [], info.value
+    while e is not None:
+        chain.append(str(e))
+        e = e.__cause__ or e.__context__
+    assert any("sample_ray" in m and "not supported" in m for m in chain), chain
 
 
 def test_scalar_render_agrees_with_llvm(sunrise):
