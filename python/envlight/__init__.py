@@ -11,6 +11,9 @@ the map's luminance, and answers in batches over numpy arrays (float32):
   sampling at shading points, in proportion to radiance × max(0, n·ω);
 - ``verify()``: the invariant checks, as ``envlight verify`` prints them.
 
+``envlight.mitsuba.register()`` adds the light to Mitsuba 3 as the emitter type
+``"envlight"`` (see ``help(envlight.mitsuba)``).
+
 Frames (``frame=``): ``"z-up"`` is the library's (a map point ``(u, v)`` looks
 along ``(sin θ cos φ, sin θ sin φ, cos θ)`` with ``θ = π v``, ``φ = 2π u``);
 ``"y-up"`` is Mitsuba 3's envmap frame, ``(y, z, -x)`` of the z-up direction. The
