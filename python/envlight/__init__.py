@@ -15,6 +15,9 @@ Large batch outputs (256 KiB and up) live in buffers that go back to a small
 cache when their arrays are freed, so that the next batch call does not pay for
 fresh pages (at most 8 buffers, 512 MiB); ``release_buffers()`` empties it.
 
+``envlight.mitsuba.register()`` adds the light to Mitsuba 3 as the emitter type
+``"envlight"`` (see ``help(envlight.mitsuba)``).
+
 Frames (``frame=``): ``"z-up"`` is the library's (a map point ``(u, v)`` looks
 along ``(sin θ cos φ, sin θ sin φ, cos θ)`` with ``θ = π v``, ``φ = 2π u``);
 ``"y-up"`` is Mitsuba 3's envmap frame, ``(y, z, -x)`` of the z-up direction. The

@@ -13,7 +13,7 @@ _F32 = npt.NDArray[np.float32]
 _Sampler = Literal["inversion", "alias", "hierarchical"]
 _Density = Literal["piecewise-constant", "piecewise-bilinear"]
 _Mapping = Literal["equirectangular", "equal-area"]
-_Lookup = Literal["bilinear", "nearest"]
+_Lookup = Literal["bilinear", "nearest", "node"]
 _Frame = Literal["z-up", "y-up"]
 
 class EnvironmentLight:

@@ -171,6 +171,11 @@ enum envlight_lookup
    * The texel that contains the point.
    */
   ENVLIGHT_LOOKUP_NEAREST = 1,
+  /**
+   * Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
+   * as Mitsuba 3's envmap reads a map (equirectangular, piecewise-constant density).
+   */
+  ENVLIGHT_LOOKUP_NODE = 2,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L

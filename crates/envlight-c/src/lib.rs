@@ -120,6 +120,9 @@ pub enum envlight_lookup {
     ENVLIGHT_LOOKUP_BILINEAR = 0,
     /// The texel that contains the point.
     ENVLIGHT_LOOKUP_NEAREST = 1,
+    /// Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
+    /// as Mitsuba 3's envmap reads a map (equirectangular, piecewise-constant density).
+    ENVLIGHT_LOOKUP_NODE = 2,
 }
 
 /// How a light is built. Start from `envlight_light_options_default()` and change
@@ -597,10 +600,11 @@ fn light_options(o: &envlight_light_options, function: &str) -> Result<LightOpti
         function,
         "lookup",
         o.lookup,
-        &[Lookup::Bilinear, Lookup::Nearest],
+        &[Lookup::Bilinear, Lookup::Nearest, Lookup::Node],
         |l| match l {
             Lookup::Bilinear => "bilinear",
             Lookup::Nearest => "nearest",
+            Lookup::Node => "node",
         },
     )?;
     if !o.rotate_deg.is_finite() {
@@ -1039,6 +1043,7 @@ pub extern "C" fn envlight_light_get_info(
             lookup: match options.lookup {
                 Lookup::Bilinear => 0,
                 Lookup::Nearest => 1,
+                Lookup::Node => 2,
             },
             integral_rgb: light.integral_rgb(),
             integral_luminance: light.integral_luminance(),

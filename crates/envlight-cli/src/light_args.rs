@@ -93,6 +93,9 @@ pub enum LookupArg {
     /// clamp); the importance is blurred by [1 6 1]/8 so every lit direction can be
     /// sampled.
     Bilinear,
+    /// Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
+    /// as Mitsuba 3's envmap reads a map; lat-long maps, piecewise-constant density.
+    Node,
 }
 
 /// `--sampler`.
@@ -241,6 +244,7 @@ impl LightArgs {
             lookup: match self.lookup {
                 LookupArg::Nearest => Lookup::Nearest,
                 LookupArg::Bilinear => Lookup::Bilinear,
+                LookupArg::Node => Lookup::Node,
             },
             sampler: self.sampler.to_library(),
             density: self.density.to_library(),

@@ -103,6 +103,7 @@ const SAMPLER_ALIAS: u32 = 1u;
 const DENSITY_BILINEAR: u32 = 1u;
 const MAPPING_EQUAL_AREA: u32 = 1u;
 const LOOKUP_BILINEAR: u32 = 1u;
+const LOOKUP_NODE: u32 = 2u;
 const RADIANCE_F16: u32 = 1u;
 
 // (sin πx, cos πx) to about 2 f32 ulps, with no rounding of π x (full relative
@@ -750,11 +751,22 @@ fn clamped_pair(t: f32, n: u32) -> Pair {
     return Pair(max(i, 1u) - 1u, min(i, n - 1u), s - f32(i));
 }
 
+// The two rows around t when the n rows are nodes from t = 0 to t = 1 (row j at
+// j/(n − 1)), and the second's weight; t clamped into [0, 1]. One row: (0, 0, 0).
+fn node_pair(t: f32, n: u32) -> Pair {
+    if n < 2u {
+        return Pair(0u, 0u, 0.0);
+    }
+    let s = unit_closed(t) * f32(n - 1u);
+    let i = floor_index(s, n - 1u);
+    return Pair(i, i + 1u, s - f32(i));
+}
+
 fn lookup(uv: vec2<f32>) -> vec3<f32> {
     let w = params.image_width;
     let h = params.image_height;
     let periodic_u = params.mapping != MAPPING_EQUAL_AREA;
-    if params.lookup != LOOKUP_BILINEAR {
+    if params.lookup != LOOKUP_BILINEAR && params.lookup != LOOKUP_NODE {
         var u = uv.x;
         if periodic_u {
             u = periodic(u);
@@ -777,7 +789,12 @@ fn lookup(uv: vec2<f32>) -> vec3<f32> {
     } else {
         px = clamped_pair(uv.x, w);
     }
-    let py = clamped_pair(uv.y, h);
+    var py: Pair;
+    if params.lookup == LOOKUP_NODE {
+        py = node_pair(uv.y, h);
+    } else {
+        py = clamped_pair(uv.y, h);
+    }
     let fs = px.weight;
     let ft = py.weight;
     let gs = 1.0 - fs;

@@ -90,6 +90,15 @@ fn ported() -> Vec<(String, LightOptions)> {
             }
         }
     }
+    // The node lookup: lat-long maps, piecewise-constant density.
+    for sampler in [Sampler::Inversion, Sampler::Alias] {
+        let name = format!("{} node", sampler.name());
+        let density = Density::PiecewiseConstant;
+        out.push((
+            name,
+            options(sampler, density, Mapping::Equirectangular, Lookup::Node),
+        ));
+    }
     out
 }
 

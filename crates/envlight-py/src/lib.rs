@@ -78,10 +78,11 @@ fn light_options(
     let lookup = choose(
         "lookup",
         lookup,
-        &[Lookup::Bilinear, Lookup::Nearest],
+        &[Lookup::Bilinear, Lookup::Nearest, Lookup::Node],
         |l| match l {
             Lookup::Bilinear => "bilinear",
             Lookup::Nearest => "nearest",
+            Lookup::Node => "node",
         },
     )?;
     if !rotate.is_finite() {

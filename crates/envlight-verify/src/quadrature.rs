@@ -54,6 +54,12 @@ pub struct Quadrature {
     pub nv: usize,
     /// Gauss-Legendre points per cell and axis.
     pub order: usize,
+    /// 0: the `nv` rows of cells are uniform in v. `h ≥ 2` (lat-long only): they
+    /// split the `2h - 2` intervals between the texel edges `j/h` and the nodes
+    /// `k/(h-1)` of an `h`-row map read with [`envlight::Lookup::Node`]
+    /// (interleaved: `0 < 1/h < 1/(h-1) < 2/h < …`), `nv / (2h - 2)` cells each, so
+    /// that neither the density's steps nor the radiance's kinks fall inside a cell.
+    pub node_rows: usize,
 }
 
 impl Quadrature {
@@ -80,14 +86,22 @@ impl Quadrature {
                 nu: min_cells[0],
                 nv: min_cells[1],
                 order,
+                node_rows: 0,
             };
         };
         match g {
             Grid::Equirect {
                 width,
                 height,
+                node_rows,
                 to_world,
             } => {
+                // Texel edges and node rows interleave: 2h - 2 intervals along v.
+                let (node_rows, height) = if node_rows && height >= 2 {
+                    (height, 2 * height - 2)
+                } else {
+                    (0, height)
+                };
                 let mut su = min_cells[0].div_ceil(width).div_ceil(step).max(1) * step;
                 let mut sv = min_cells[1].div_ceil(height).div_ceil(step).max(1) * step;
                 while width * su * height * sv > max_total && (su > step || sv > step) {
@@ -103,6 +117,7 @@ impl Quadrature {
                     nu: width * su,
                     nv: height * sv,
                     order,
+                    node_rows,
                 }
             }
             Grid::EqualArea { size, to_world } => {
@@ -117,6 +132,7 @@ impl Quadrature {
                     nu: size * sub,
                     nv: size * sub,
                     order,
+                    node_rows: 0,
                 }
             }
         }
@@ -154,11 +170,12 @@ impl Quadrature {
         let mut p = Points::with_capacity(self.nu * per_cell);
         match self.param {
             Param::Equirect => {
+                let (start, dv) = self.v_cell(j, dv);
                 let heights: Vec<(f64, f64, f64)> = t
                     .iter()
                     .zip(w)
                     .map(|(&tv, &wv)| {
-                        let (st, ct) = (PI * (j as f64 + tv) * dv).sin_cos();
+                        let (st, ct) = (PI * (start + tv * dv)).sin_cos();
                         (st, ct, wv * st * PI * dv * 2.0 * PI * du)
                     })
                     .collect();
@@ -185,6 +202,27 @@ impl Quadrature {
             }
         }
         p
+    }
+
+    /// Where row `j` of cells starts along v and its height (`dv` for uniform rows;
+    /// see [`Self::node_rows`]).
+    fn v_cell(&self, j: usize, dv: f64) -> (f64, f64) {
+        let h = self.node_rows;
+        if h < 2 {
+            return (j as f64 * dv, dv);
+        }
+        let split = (self.nv / (2 * h - 2)).max(1);
+        let edge = |n: usize| {
+            if n.is_multiple_of(2) {
+                (n / 2) as f64 / (h - 1) as f64
+            } else {
+                n.div_ceil(2) as f64 / h as f64
+            }
+        };
+        let (base, sub) = (j / split, j % split);
+        let (lo, hi) = (edge(base), edge(base + 1));
+        let height = (hi - lo) / split as f64;
+        (lo + sub as f64 * height, height)
     }
 
     /// Per-cell sums of `f(point)` over row `j`, the sampler's values at the

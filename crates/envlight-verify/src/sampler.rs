@@ -28,6 +28,10 @@ pub enum Grid {
         width: usize,
         /// Cells along v (θ).
         height: usize,
+        /// Whether the radiance has its kinks along v at the rows as nodes from
+        /// pole to pole (`v = j/(height-1)`, [`envlight::Lookup::Node`]) rather
+        /// than at the cells' centre lines.
+        node_rows: bool,
         /// Grid frame to world.
         to_world: Rotation,
     },
@@ -177,6 +181,7 @@ impl SphereSampler for EnvironmentLight {
             envlight::light::Mapping::Equirectangular => Grid::Equirect {
                 width: self.image().width(),
                 height: self.image().height(),
+                node_rows: self.options().lookup == envlight::Lookup::Node,
                 to_world,
             },
             envlight::light::Mapping::EqualArea => Grid::EqualArea {

@@ -15,6 +15,13 @@ pub enum Lookup {
     /// (centres at `((i+.5)/w, (j+.5)/h)`), wrapping in u and clamping in v.
     #[default]
     Bilinear,
+    /// Bilinear interpolation with the rows as nodes from pole to pole: row `j` at
+    /// `v = j/(h-1)` (one row: constant in v), and texel centres `(i+.5)/w` along
+    /// u, wrapped (clamped for a clamped u). Mitsuba 3's `envmap` reads a
+    /// latitude-longitude map so: its duplicated seam column and half-texel shift
+    /// are this u. The same radiance as [`Lookup::Bilinear`] along u, a different
+    /// one along v.
+    Node,
 }
 
 /// What happens to u outside `[0, 1)`.
@@ -220,7 +227,8 @@ impl EnvImage {
     pub fn lookup_wrapped(&self, u: f32, v: f32, mode: Lookup, wrap: WrapU) -> [f32; 3] {
         match mode {
             Lookup::Nearest => self.nearest(u, v, wrap),
-            Lookup::Bilinear => self.bilinear(u, v, wrap),
+            Lookup::Bilinear => self.bilinear(u, wrap, clamped_pair(v, self.height)),
+            Lookup::Node => self.bilinear(u, wrap, node_pair(v, self.height)),
         }
     }
 
@@ -234,7 +242,7 @@ impl EnvImage {
     /// and bottom half-rows are constant in v).
     #[inline]
     pub fn lookup_bilinear(&self, u: f32, v: f32) -> [f32; 3] {
-        self.bilinear(u, v, WrapU::Periodic)
+        self.bilinear(u, WrapU::Periodic, clamped_pair(v, self.height))
     }
 
     #[inline(always)]
@@ -266,9 +274,10 @@ impl EnvImage {
     /// Texel centres sit at `(i + ½)/n`, so the lower neighbour of a coordinate is
     /// `⌊u n - ½⌋`, which is -1 left of the first centre. Each axis is shifted so
     /// that index is never negative before the floor (by a period for a periodic u,
-    /// by one texel for a clamped axis), then mapped back.
+    /// by one texel for a clamped axis), then mapped back. The rows and weight
+    /// along v come from the caller (texel centres or nodes).
     #[inline(always)]
-    fn bilinear(&self, u: f32, v: f32, wrap: WrapU) -> [f32; 3] {
+    fn bilinear(&self, u: f32, wrap: WrapU, rows: (usize, usize, f32)) -> [f32; 3] {
         let (w, h) = (self.width, self.height);
         let (x0, x1, fs) = match wrap {
             WrapU::Periodic => {
@@ -280,7 +289,7 @@ impl EnvImage {
             }
             WrapU::Clamp => clamped_pair(u, w),
         };
-        let (y0, y1, ft) = clamped_pair(v, h);
+        let (y0, y1, ft) = rows;
         debug_assert!(x0 < w && x1 < w && y0 < h && y1 < h);
         // SAFETY: `periodic` and `clamped_pair` clamp their indices into
         // `[0, w - 1]` and `[0, h - 1]`, and the texels are `w h` long (checked
@@ -363,6 +372,20 @@ impl EnvImage {
                     let (y0, y1, ft) = clamped_pair_i32(v[i], h32);
                     (x0, x1, fs, y0, y1, ft)
                 }
+                Lookup::Node => {
+                    let (x0, x1, fs) = match wrap {
+                        WrapU::Periodic => {
+                            let s = periodic_lanes(u[i]) * wf - 0.5 + wf;
+                            let k = floor_index_i32(s, 2 * w32 - 1);
+                            let x0 = if k >= w32 { k - w32 } else { k };
+                            let x1 = if x0 + 1 == w32 { 0 } else { x0 + 1 };
+                            (x0, x1, s - k as f32)
+                        }
+                        WrapU::Clamp => clamped_pair_i32(u[i], w32),
+                    };
+                    let (y0, y1, ft) = node_pair(v[i], h);
+                    (x0, x1, fs, y0 as i32, y1 as i32, ft)
+                }
             };
             (b.x0[i], b.x1[i], b.fs[i]) = (x0 as u32, x1 as u32, fs);
             (b.y0[i], b.y1[i], b.ft[i]) = (y0 as u32, y1 as u32, ft);
@@ -380,7 +403,7 @@ impl EnvImage {
                 .as_ptr()
                 .wrapping_add(b.y0[i] as usize * w + b.x0[i] as usize);
             prefetch_ptr(first);
-            if b.mode == Lookup::Bilinear {
+            if b.mode != Lookup::Nearest {
                 let second = b.y1[i] as usize * w + b.x0[i] as usize;
                 prefetch_ptr(self.texels.as_ptr().wrapping_add(second));
             }
@@ -404,7 +427,7 @@ impl EnvImage {
         let texel = |x: usize, y: usize| unsafe { *self.texels.get_unchecked(y * w + x) };
         match b.mode {
             Lookup::Nearest => texel(x0, y0),
-            Lookup::Bilinear => {
+            Lookup::Bilinear | Lookup::Node => {
                 let (a, bb, c, d) = (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1));
                 blend([a, bb, c, d], b.fs[i], b.ft[i])
             }
@@ -477,6 +500,20 @@ fn clamped_pair(t: f32, n: usize) -> (usize, usize, f32) {
     let s = t * len_f32(n) + 0.5;
     let i = floor_index(s, n + 1);
     (i.saturating_sub(1), i.min(n - 1), s - len_f32(i))
+}
+
+/// The two rows around `t` when the `n` rows are nodes from `t = 0` to `t = 1`
+/// (row `j` at `j/(n-1)`), and the second's weight; `t` is clamped into `[0, 1]`
+/// (NaN to 0). One row: `(0, 0, 0)`.
+#[inline(always)]
+fn node_pair(t: f32, n: usize) -> (usize, usize, f32) {
+    if n < 2 {
+        return (0, 0, 0.0);
+    }
+    let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
+    let s = t * len_f32(n - 1);
+    let i = floor_index(s, n - 1);
+    (i, i + 1, s - len_f32(i))
 }
 
 #[cfg(test)]

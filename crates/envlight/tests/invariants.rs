@@ -44,7 +44,7 @@ fn rotated(image: EnvImage, lookup: Lookup, degrees: f32) -> EnvironmentLight {
     .unwrap()
 }
 
-use Lookup::{Bilinear, Nearest};
+use Lookup::{Bilinear, Nearest, Node};
 
 // ---------------------------------------------------------------------------
 // Every sampler, density and mapping of the light (issue 5): the same checks,
@@ -133,6 +133,26 @@ invariant_cases! {
     rotated_random_bilinear:       rotated(random(48, 24, 7), Bilinear, 37.0), FULL;
     rotated_hot_seam_bilinear:     rotated(hot(64, 32, 63, 9), Bilinear, 37.0), FULL;
     builtin_sky_bilinear:          light(envlight::builtin::sky(256, 128), Bilinear), FULL;
+    // The node lookup (Mitsuba envmap's rows as nodes from pole to pole) and the
+    // importance that follows it: every check, the edge rows and the seam included.
+    constant_node:                 light(constant(64, 32), Node), FULL;
+    gradient_node:                 light(gradient(64, 32), Node), FULL;
+    hot_middle_node:               light(hot(64, 32, 27, 13), Node), FULL;
+    hot_top_row_node:              light(hot(64, 32, 20, 0), Node), FULL;
+    hot_bottom_row_node:           light(hot(64, 32, 41, 31), Node), FULL;
+    hot_second_row_node:           light(hot(64, 32, 5, 1), Node), FULL;
+    hot_seam_last_col_node:        light(hot(64, 32, 63, 20), Node), FULL;
+    random_91x37_node:             light(random(91, 37, 91), Node), FULL;
+    two_rows_node:                 light(random(16, 2, 4), Node), FULL;
+    one_texel_node:                light(constant(1, 1), Node), FULL;
+    wide_16384x1_node:             light(gradient(16384, 1), Node), FULL;
+    tall_1x4096_node:              light(gradient(1, 4096), Node), FULL;
+    huge_range_node:               light(huge_range(32, 16), Node), HUGE_RANGE;
+    rotated_random_node:           rotated(random(48, 24, 7), Node, 37.0), FULL;
+    builtin_sky_node:              light(envlight::builtin::sky(256, 128), Node), FULL;
+    alias_hot_top_row_node:        combo(hot(64, 32, 20, 0), Node, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
+    hierarchical_hot_seam_node:    combo(hot(64, 32, 63, 20), Node, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
+    table_quarter_hot_top_row_node: table(hot(64, 32, 21, 0), Node, Inversion, 16), FULL;
     // The same importance through other samplers of the grid (one line each).
     alias_random_bilinear:         combo(random(91, 37, 91), Bilinear, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
     alias_hot_top_row_nearest:     combo(hot(64, 32, 20, 0), Nearest, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
@@ -193,6 +213,7 @@ macro_rules! black_cases {
 black_cases! {
     black_nearest:        light(black(16, 8), Nearest);
     black_bilinear:       light(black(16, 8), Bilinear);
+    black_node:           light(black(16, 8), Node);
     black_one_texel:      light(black(1, 1), Bilinear);
     black_wide:           light(black(4096, 1), Bilinear);
 }

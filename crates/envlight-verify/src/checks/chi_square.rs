@@ -142,6 +142,7 @@ pub fn chi_square(s: &dyn SphereSampler, n: usize, seed: u64, max_bins: usize) -
         nu: fine_u * split,
         nv: fine_v * split,
         order: 2,
+        node_rows: 0,
     };
     let quadrature_cells = q.cells(s, Needs::PDF, |pt| {
         [if pt.pdf.is_finite() && pt.pdf > 0.0 {

@@ -37,6 +37,7 @@ impl EnvironmentLight {
         p[param::LOOKUP] = match self.options().lookup {
             Lookup::Nearest => value::LOOKUP_NEAREST,
             Lookup::Bilinear => value::LOOKUP_BILINEAR,
+            Lookup::Node => value::LOOKUP_NODE,
         };
         p[param::RADIANCE_FORMAT] = match options.radiance {
             RadianceFormat::F32 => value::RADIANCE_F32,

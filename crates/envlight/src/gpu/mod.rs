@@ -215,6 +215,9 @@ pub mod value {
     pub const LOOKUP_NEAREST: u32 = 0;
     /// [`super::param::LOOKUP`]: bilinear between texel centres.
     pub const LOOKUP_BILINEAR: u32 = 1;
+    /// [`super::param::LOOKUP`]: bilinear with rows as nodes from pole to pole
+    /// (Mitsuba's envmap; [`crate::Lookup::Node`]).
+    pub const LOOKUP_NODE: u32 = 2;
     /// [`super::param::RADIANCE_FORMAT`]: RGB `f32`, 3 words per texel.
     pub const RADIANCE_F32: u32 = 0;
     /// [`super::param::RADIANCE_FORMAT`]: RGBA `f16`, 2 words per texel.

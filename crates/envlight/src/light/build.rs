@@ -25,7 +25,8 @@ impl EnvironmentLight {
     /// # Errors
     /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
     /// bilinear density is asked of a sampler other than inversion, an equal-area
-    /// input is not square, or an equal-area input is asked for a lat-long light.
+    /// input is not square, an equal-area input is asked for a lat-long light, or
+    /// the node lookup is asked of the equal-area mapping or the bilinear density.
     pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
         Self::with_progress(image, options, &|_| {})
     }
@@ -54,6 +55,24 @@ impl EnvironmentLight {
                 "the piecewise-bilinear density is sampled by inversion only, not by the {} sampler",
                 options.sampler.name()
             )));
+        }
+        if options.lookup == Lookup::Node {
+            // The node lookup is the equirectangular map's (Mitsuba's envmap); the
+            // piecewise-bilinear density's nodes sit at texel centres, whose
+            // support does not cover it near the poles.
+            if options.mapping != Mapping::Equirectangular {
+                return Err(Error::InvalidOption(
+                    "the node lookup reads equirectangular maps only, not the equal-area square"
+                        .into(),
+                ));
+            }
+            if options.density == Density::PiecewiseBilinear {
+                return Err(Error::InvalidOption(
+                    "the node lookup needs the piecewise-constant density (the piecewise-bilinear \
+                     density's nodes are texel centres)"
+                        .into(),
+                ));
+            }
         }
         let image = match (options.input_mapping, options.mapping) {
             (Mapping::Equirectangular, Mapping::Equirectangular) => image,
@@ -371,10 +390,16 @@ pub(super) fn importance_row(
                 *o = y * factor;
             }
         }
-        Lookup::Bilinear => {
+        Lookup::Bilinear | Lookup::Node => {
             // Vertical [1 6 1]/8 (clamped) into the cache's scratch row, then
             // horizontal into `out`: two passes without branches, which vectorize.
-            cache.vertical_blur(image, j);
+            // The node lookup has its own vertical weights (`node_row_weights`) and
+            // the bilinear lookup's u.
+            if lookup == Lookup::Node {
+                cache.vertical_node_mean(image, j);
+            } else {
+                cache.vertical_blur(image, j);
+            }
             let vertical = &cache.blurred;
             let (first, last) = (vertical[0], vertical[w - 1]);
             let (before_first, beyond_last) = match mapping.wrap() {
@@ -475,6 +500,21 @@ impl LuminanceRows {
         }
     }
 
+    /// Row `j`'s luminance averaged over its band of v as [`Lookup::Node`]
+    /// reconstructs it (weights from [`node_row_weights`]), into `blurred`.
+    fn vertical_node_mean(&mut self, image: &EnvImage, j: usize) {
+        let h = image.height();
+        for row in [j.saturating_sub(1), j, (j + 1).min(h - 1)] {
+            self.row(image, row);
+        }
+        let [wa, wc, wb] = node_row_weights(j, h);
+        let slot = |j: usize| &self.slots.iter().find(|s| s.0 == j).expect("cached").1;
+        let (above, centre, below) = (slot(j.saturating_sub(1)), slot(j), slot((j + 1).min(h - 1)));
+        for (((b, &a), &c), &d) in self.blurred.iter_mut().zip(above).zip(centre).zip(below) {
+            *b = wa * a + wc * c + wb * d;
+        }
+    }
+
     /// Luminance and RGB sums of row `j`, computed unless cached.
     pub(super) fn row(&mut self, image: &EnvImage, j: usize) -> (&[f32], [f64; 3]) {
         let slot = match self.slots.iter().position(|s| s.0 == j) {
@@ -499,6 +539,29 @@ impl LuminanceRows {
     }
 }
 
+/// The weights of rows `j - 1`, `j`, `j + 1` in the mean of the [`Lookup::Node`]
+/// reconstruction over texel row `j`'s band `v ∈ [j/h, (j+1)/h)`, for an image of
+/// `h` rows. In node units (`t = v (h-1)`) the band is `[j - α, j + β)` with
+/// `α = j/h`, `β = 1 - (j+1)/h`, both below 1: it reaches back into the interval of
+/// nodes `j-1, j` by α and forward into that of `j, j+1` by β, where the
+/// reconstruction is linear, so the mean is exactly
+/// `(α²/2 · r[j-1] + (α + β - α²/2 - β²/2) · r[j] + β²/2 · r[j+1]) / (α + β)`.
+/// A row weight is 0 exactly when that row's nodes do not reach the band (the
+/// first and last rows' outer neighbours), so the importance built from these
+/// weights is positive wherever the lookup is. One row: `[0, 1, 0]`.
+pub(crate) fn node_row_weights(j: usize, h: usize) -> [f32; 3] {
+    if h < 2 {
+        return [0.0, 1.0, 0.0];
+    }
+    let hf = h as f64;
+    let alpha = j as f64 / hf;
+    let beta = 1.0 - (j + 1) as f64 / hf;
+    let length = alpha + beta;
+    let above = 0.5 * alpha * alpha / length;
+    let below = 0.5 * beta * beta / length;
+    [above as f32, (1.0 - above - below) as f32, below as f32]
+}
+
 /// Solid angle `W_j` attributed to each row by `lookup` (they sum to 4π).
 fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
     let hf = h as f64;
@@ -506,6 +569,7 @@ fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
         Lookup::Nearest => (0..h)
             .map(|j| 2.0 * PI * ((PI * j as f64 / hf).cos() - (PI * (j + 1) as f64 / hf).cos()))
             .collect(),
+        Lookup::Node => node_row_solid_angles(h),
         Lookup::Bilinear => {
             const GL_T: [f64; 4] = [
                 0.069_431_844_202_973_71,
@@ -543,6 +607,47 @@ fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
     }
 }
 
+/// [`row_solid_angles`] for [`Lookup::Node`]: row `k` is the node at
+/// `v = k/(h-1)`, its weight the hat function over the two node intervals beside
+/// it; each interval integrated by 8-point Gauss-Legendre (of the smooth
+/// `2π² sin πv` times a linear weight).
+fn node_row_solid_angles(h: usize) -> Vec<f64> {
+    if h < 2 {
+        return vec![4.0 * PI];
+    }
+    const GL_T: [f64; 8] = [
+        0.019_855_071_751_231_856,
+        0.101_666_761_293_186_63,
+        0.237_233_795_041_835_5,
+        0.408_282_678_752_175_1,
+        0.591_717_321_247_825,
+        0.762_766_204_958_164_5,
+        0.898_333_238_706_813_4,
+        0.980_144_928_248_768_1,
+    ];
+    const GL_W: [f64; 8] = [
+        0.050_614_268_145_188_13,
+        0.111_190_517_226_687_24,
+        0.156_853_322_938_943_64,
+        0.181_341_891_689_181,
+        0.181_341_891_689_181,
+        0.156_853_322_938_943_64,
+        0.111_190_517_226_687_24,
+        0.050_614_268_145_188_13,
+    ];
+    let len = 1.0 / (h - 1) as f64;
+    let mut weights = vec![0.0f64; h];
+    for k in 0..h - 1 {
+        for (t, gw) in GL_T.iter().zip(GL_W) {
+            let v = (k as f64 + t) * len;
+            let dw = 2.0 * PI * PI * (PI * v).sin() * gw * len;
+            weights[k] += (1.0 - t) * dw;
+            weights[k + 1] += t * dw;
+        }
+    }
+    weights
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -558,7 +663,7 @@ mod tests {
                 .collect();
             let image = EnvImage::new(w, h, texels).expect("a valid image");
             for mapping in Mapping::ALL {
-                for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+                for lookup in [Lookup::Nearest, Lookup::Bilinear, Lookup::Node] {
                     let mut cache = LuminanceRows::new(w);
                     let mut out = vec![0.0f32; w];
                     for j in 0..h {
@@ -586,6 +691,27 @@ mod tests {
                                     }
                                     sum / 64.0
                                 }
+                                Lookup::Node => {
+                                    // The band's mean of the node reconstruction in
+                                    // v, from its definition (α, β as documented).
+                                    let (hf, jf) = (h as f64, j as f64);
+                                    let vertical = if h < 2 {
+                                        [0.0, 1.0, 0.0]
+                                    } else {
+                                        let (a, b) = (jf / hf, 1.0 - (jf + 1.0) / hf);
+                                        let (above, below) = (a * a / 2.0, b * b / 2.0);
+                                        let centre = a + b - above - below;
+                                        [above / (a + b), centre / (a + b), below / (a + b)]
+                                    };
+                                    let weights = [1.0, 6.0, 1.0];
+                                    let mut sum = 0.0;
+                                    for (a, wa) in (-1..=1).zip(weights) {
+                                        for (b, wb) in (-1..=1).zip(vertical) {
+                                            sum += wa * wb * y(i + a, jj + b);
+                                        }
+                                    }
+                                    sum / 8.0
+                                }
                             } * factor;
                             let err = (got as f64 - want).abs();
                             assert!(
@@ -605,7 +731,7 @@ mod tests {
 
     #[test]
     fn row_solid_angles_sum_to_the_sphere() {
-        for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+        for lookup in [Lookup::Nearest, Lookup::Bilinear, Lookup::Node] {
             for h in [1, 2, 3, 17, 512] {
                 let total: f64 = row_solid_angles(h, lookup).iter().sum();
                 assert!(

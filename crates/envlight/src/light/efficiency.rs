@@ -126,11 +126,36 @@ impl EnvironmentLight {
                 below.copy_from_slice(cache.row(&self.image, (j + 1).min(h - 1)).0);
                 let (above, here, below) = (&*above, &*here, &*below);
                 let mut blended = vec![0.0f32; w];
-                for &tv in &nodes {
+                // Node heights and weights (relative to the uniform ¼): the node
+                // lookup is kinked inside the band, so its nodes split there.
+                let heights: Vec<(f64, f64)> = if lookup == Lookup::Node {
+                    node_lookup_heights(j, h)
+                } else {
+                    nodes.iter().map(|&tv| (tv, 1.0)).collect()
+                };
+                for &(tv, qw) in &heights {
                     let v = (j as f64 + tv) / h as f64;
                     let dw = jacobian_scale * mapping.area_factor(v);
                     match lookup {
                         Lookup::Nearest => blended.copy_from_slice(here),
+                        Lookup::Node => {
+                            // Rows as nodes at k/(h-1): the two around v are among
+                            // j-1, j, j+1.
+                            let (k0, k1, t) = node_rows(v, h);
+                            let row = |k: usize| {
+                                if k + 1 == j {
+                                    above
+                                } else if k == j {
+                                    here
+                                } else {
+                                    below
+                                }
+                            };
+                            let (r0, r1) = (row(k0), row(k1));
+                            for ((b, &y0), &y1) in blended.iter_mut().zip(r0).zip(r1) {
+                                *b = y0 + t * (y1 - y0);
+                            }
+                        }
                         Lookup::Bilinear => {
                             let (other, t) = if tv < 0.5 {
                                 (above, (0.5 - tv) as f32)
@@ -152,9 +177,9 @@ impl EnvironmentLight {
                         };
                         let [sum_y, sum_y2p, sum_y2p_full] =
                             node_row_moments(&blended, [&inv_texel_pdf, second], lookup, periodic);
-                        ey += sum_y * dw;
-                        ey2p += sum_y2p * (dw * dw);
-                        ey2p_full += sum_y2p_full * (dw * dw);
+                        ey += sum_y * dw * qw;
+                        ey2p += sum_y2p * (dw * dw) * qw;
+                        ey2p_full += sum_y2p_full * (dw * dw) * qw;
                         continue;
                     }
                     // The density at every u node of this height, in blocks.
@@ -179,20 +204,20 @@ impl EnvironmentLight {
                         for (n, &tu) in nodes.iter().enumerate() {
                             let y = match lookup {
                                 Lookup::Nearest => blended[i],
-                                Lookup::Bilinear if tu < 0.5 => {
+                                Lookup::Bilinear | Lookup::Node if tu < 0.5 => {
                                     let t = (0.5 - tu) as f32;
                                     blended[i] + t * (left - blended[i])
                                 }
-                                Lookup::Bilinear => {
+                                Lookup::Bilinear | Lookup::Node => {
                                     let t = (tu - 0.5) as f32;
                                     blended[i] + t * (right - blended[i])
                                 }
                             } as f64;
-                            ey += y * dw;
+                            ey += y * dw * qw;
                             if y > 0.0 {
                                 let p_uv = node_pdfs[4 * i + n] as f64;
                                 ey2p += if p_uv > 0.0 {
-                                    y * y * dw * dw / p_uv
+                                    y * y * dw * dw * qw / p_uv
                                 } else {
                                     f64::INFINITY
                                 };
@@ -208,6 +233,51 @@ impl EnvironmentLight {
             .into_iter()
             .fold((0.0, 0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
     }
+}
+
+/// The node heights within texel row `j` (as fractions of the row) and their
+/// weights relative to the uniform rule's ¼ each, for [`Lookup::Node`]: four
+/// Gauss-Legendre points on either side of the node `v = j/(h-1)` that lies in the
+/// row (exact for polynomials of degree 7 on each piece of the reconstruction:
+/// near the poles `Y² sin² θ` is of degree 4 in v). One row: the uniform rule.
+fn node_lookup_heights(j: usize, h: usize) -> Vec<(f64, f64)> {
+    if h < 2 {
+        return efficiency_nodes().iter().map(|&tv| (tv, 1.0)).collect();
+    }
+    const GL_X: [f64; 4] = [
+        0.069_431_844_202_973_71,
+        0.330_009_478_207_571_9,
+        0.669_990_521_792_428_1,
+        0.930_568_155_797_026_3,
+    ];
+    const GL_W: [f64; 4] = [
+        0.173_927_422_568_726_9,
+        0.326_072_577_431_273_1,
+        0.326_072_577_431_273_1,
+        0.173_927_422_568_726_9,
+    ];
+    // The node's place in the row, in [0, 1].
+    let a = (j as f64 / (h - 1) as f64 * h as f64 - j as f64).clamp(0.0, 1.0);
+    let mut out = Vec::with_capacity(8);
+    for (start, length) in [(0.0, a), (a, 1.0 - a)] {
+        if length > 0.0 {
+            for (x, w) in GL_X.iter().zip(GL_W) {
+                out.push((start + length * x, 4.0 * length * w));
+            }
+        }
+    }
+    out
+}
+
+/// The rows [`Lookup::Node`] blends at height `v` of an image of `h` rows (rows as
+/// nodes at `k/(h-1)`) and the second's weight.
+fn node_rows(v: f64, h: usize) -> (usize, usize, f32) {
+    if h < 2 {
+        return (0, 0, 0.0);
+    }
+    let s = v.clamp(0.0, 1.0) * (h - 1) as f64;
+    let k = (s.floor() as usize).min(h - 2);
+    (k, k + 1, (s - k as f64) as f32)
 }
 
 /// `(∫ Y)² / ∫ Y²/p`, or 0 when either is not positive and finite.
@@ -248,7 +318,8 @@ fn node_row_moments(
     periodic: bool,
 ) -> [f64; 3] {
     let w = blended.len();
-    let bilinear = lookup == Lookup::Bilinear;
+    // Along u the node lookup is the bilinear one.
+    let bilinear = lookup != Lookup::Nearest;
     let texel = |left: f32, centre: f32, right: f32, inv_p: f64, inv_q: f64| {
         texel_moments(left, centre, right, inv_p, inv_q, bilinear)
     };
@@ -295,7 +366,7 @@ fn interior_moments(blended: &[f32], inv_p: &[f64], inv_q: &[f64], lookup: Looku
     fn avx512(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
         interior_lanes(blended, inv_p, inv_q, bilinear)
     }
-    let bilinear = lookup == Lookup::Bilinear;
+    let bilinear = lookup != Lookup::Nearest;
     match VectorWidth::detect() {
         // SAFETY: each wide version runs only on a CPU with its features.
         VectorWidth::Avx512 => unsafe { avx512(blended, inv_p, inv_q, bilinear) },
@@ -425,10 +496,12 @@ mod tests {
                         for &t in &nodes {
                             let y = match lookup {
                                 Lookup::Nearest => at(i),
-                                Lookup::Bilinear if t < 0.5 => {
+                                Lookup::Bilinear | Lookup::Node if t < 0.5 => {
                                     at(i) + (0.5 - t) * (at(i - 1) - at(i))
                                 }
-                                Lookup::Bilinear => at(i) + (t - 0.5) * (at(i + 1) - at(i)),
+                                Lookup::Bilinear | Lookup::Node => {
+                                    at(i) + (t - 0.5) * (at(i + 1) - at(i))
+                                }
                             };
                             want_y += y;
                             if y > 0.0 {
