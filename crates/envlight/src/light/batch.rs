@@ -845,6 +845,12 @@ mod tests {
             ),
             (
                 Sampler::Inversion,
+                Density::PiecewiseConstant,
+                Lookup::Node,
+                Mapping::Equirectangular,
+            ),
+            (
+                Sampler::Inversion,
                 Density::PiecewiseBilinear,
                 Lookup::Bilinear,
                 Mapping::Equirectangular,
