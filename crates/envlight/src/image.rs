@@ -347,48 +347,48 @@ impl EnvImage {
             fs: [0.0; N],
             ft: [0.0; N],
         };
-        for i in 0..N {
-            let (x0, x1, fs, y0, y1, ft) = match mode {
-                Lookup::Nearest => {
-                    let x = match wrap {
-                        WrapU::Periodic => floor_index_i32(periodic_lanes(u[i]) * wf, w32 - 1),
-                        WrapU::Clamp => floor_index_i32(u[i] * wf, w32 - 1),
-                    };
-                    let y = floor_index_i32(v[i] * hf, h32 - 1);
-                    (x, x, 0.0, y, y, 0.0)
+        // Each mode and wrap its own loop (a branch-free body the compiler
+        // vectorizes; a `match` inside one loop kept the loop scalar).
+        if mode == Lookup::Nearest {
+            for i in 0..N {
+                let x = match wrap {
+                    WrapU::Periodic => floor_index_i32(periodic_lanes(u[i]) * wf, w32 - 1),
+                    WrapU::Clamp => floor_index_i32(u[i] * wf, w32 - 1),
+                };
+                let y = floor_index_i32(v[i] * hf, h32 - 1);
+                (b.x0[i], b.x1[i], b.y0[i], b.y1[i]) = (x as u32, x as u32, y as u32, y as u32);
+            }
+            return b;
+        }
+        // Bilinear and node lookups: the same columns.
+        match wrap {
+            WrapU::Periodic => {
+                for (i, &u) in u.iter().enumerate() {
+                    // As in `bilinear`, with selects.
+                    let s = periodic_lanes(u) * wf - 0.5 + wf;
+                    let k = floor_index_i32(s, 2 * w32 - 1);
+                    let x0 = if k >= w32 { k - w32 } else { k };
+                    let x1 = if x0 + 1 == w32 { 0 } else { x0 + 1 };
+                    (b.x0[i], b.x1[i], b.fs[i]) = (x0 as u32, x1 as u32, s - k as f32);
                 }
-                Lookup::Bilinear => {
-                    let (x0, x1, fs) = match wrap {
-                        WrapU::Periodic => {
-                            // As in `bilinear`, with selects.
-                            let s = periodic_lanes(u[i]) * wf - 0.5 + wf;
-                            let k = floor_index_i32(s, 2 * w32 - 1);
-                            let x0 = if k >= w32 { k - w32 } else { k };
-                            let x1 = if x0 + 1 == w32 { 0 } else { x0 + 1 };
-                            (x0, x1, s - k as f32)
-                        }
-                        WrapU::Clamp => clamped_pair_i32(u[i], w32),
-                    };
-                    let (y0, y1, ft) = clamped_pair_i32(v[i], h32);
-                    (x0, x1, fs, y0, y1, ft)
+            }
+            WrapU::Clamp => {
+                for (i, &u) in u.iter().enumerate() {
+                    let (x0, x1, fs) = clamped_pair_i32(u, w32);
+                    (b.x0[i], b.x1[i], b.fs[i]) = (x0 as u32, x1 as u32, fs);
                 }
-                Lookup::Node => {
-                    let (x0, x1, fs) = match wrap {
-                        WrapU::Periodic => {
-                            let s = periodic_lanes(u[i]) * wf - 0.5 + wf;
-                            let k = floor_index_i32(s, 2 * w32 - 1);
-                            let x0 = if k >= w32 { k - w32 } else { k };
-                            let x1 = if x0 + 1 == w32 { 0 } else { x0 + 1 };
-                            (x0, x1, s - k as f32)
-                        }
-                        WrapU::Clamp => clamped_pair_i32(u[i], w32),
-                    };
-                    let (y0, y1, ft) = node_pair(v[i], h);
-                    (x0, x1, fs, y0 as i32, y1 as i32, ft)
-                }
-            };
-            (b.x0[i], b.x1[i], b.fs[i]) = (x0 as u32, x1 as u32, fs);
-            (b.y0[i], b.y1[i], b.ft[i]) = (y0 as u32, y1 as u32, ft);
+            }
+        }
+        if mode == Lookup::Node {
+            for (i, &v) in v.iter().enumerate() {
+                let (y0, y1, ft) = node_pair_i32(v, h32);
+                (b.y0[i], b.y1[i], b.ft[i]) = (y0 as u32, y1 as u32, ft);
+            }
+        } else {
+            for (i, &v) in v.iter().enumerate() {
+                let (y0, y1, ft) = clamped_pair_i32(v, h32);
+                (b.y0[i], b.y1[i], b.ft[i]) = (y0 as u32, y1 as u32, ft);
+            }
         }
         b
     }
@@ -514,6 +514,21 @@ fn node_pair(t: f32, n: usize) -> (usize, usize, f32) {
     let s = t * len_f32(n - 1);
     let i = floor_index(s, n - 1);
     (i, i + 1, s - len_f32(i))
+}
+
+/// [`node_pair`] for `n < 2³¹` rows as `i32`s, with selects (for vector lanes):
+/// the same rows and weight.
+#[inline(always)]
+fn node_pair_i32(t: f32, n: i32) -> (i32, i32, f32) {
+    let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
+    let s = t * (n - 1) as f32;
+    let i = floor_index_i32(s, (n - 2).max(0));
+    let (i, j, f) = (i, i + 1, s - i as f32);
+    if n < 2 {
+        (0, 0, 0.0)
+    } else {
+        (i, j, f)
+    }
 }
 
 #[cfg(test)]
