@@ -300,19 +300,19 @@ impl EnvironmentLight {
                 |iu, iv| d.prefetch_cell(iu, iv),
                 |iu, iv| d.cell_pdfs_in_grid(iu, iv),
             ),
-            Planar::Alias(d) => self.pdf_cells(
+            Planar::Alias(d) => self.pdf_cell_lanes(
                 dirs,
                 out,
                 [d.nu(), d.nv()],
                 |iu, iv| d.prefetch_cell(iu, iv),
-                |iu, iv| d.cell_pdf(iu, iv),
+                |iu, iv| lane_by_lane(iu, iv, |iu, iv| d.cell_pdf(iu, iv)),
             ),
-            Planar::Hierarchical(d) => self.pdf_cells(
+            Planar::Hierarchical(d) => self.pdf_cell_lanes(
                 dirs,
                 out,
                 [d.nu(), d.nv()],
                 |_, _| {},
-                |iu, iv| d.cell_pdf(iu, iv),
+                |iu, iv| lane_by_lane(iu, iv, |iu, iv| d.cell_pdf(iu, iv)),
             ),
             Planar::Bilinear(d) => self.bilinear_pdfs::<true>(d, dirs, out),
         }
@@ -399,45 +399,9 @@ impl EnvironmentLight {
     }
 
     /// The pdf stage of [`Self::pdf_batch`] for a piecewise-constant density over
-    /// a `grid[0] × grid[1]` grid of cells: `cell_pdf` of the cell at each image
-    /// point of [`Self::uv_blocks`], over the Jacobian. `prefetch` asks for a cell's
-    /// data a block before `cell_pdf` reads it.
-    #[inline(always)]
-    fn pdf_cells(
-        &self,
-        dirs: &[Vec3],
-        out: &mut [f32],
-        [nu, nv]: [usize; 2],
-        prefetch: impl Fn(usize, usize),
-        cell_pdf: impl Fn(usize, usize) -> f32,
-    ) {
-        self.uv_blocks::<true, _, _>(
-            dirs,
-            out,
-            #[inline(always)]
-            |block| {
-                let (iu, iv) = (cell_indices(&block.u, nu), cell_indices(&block.v, nv));
-                for (&iu, &iv) in iu.iter().zip(&iv) {
-                    prefetch(iu as usize, iv as usize);
-                }
-                CellBlock {
-                    iu,
-                    iv,
-                    inv_jacobian: block.inv_jacobian,
-                }
-            },
-            #[inline(always)]
-            |cells: &CellBlock, out| {
-                for (i, o) in out.iter_mut().enumerate() {
-                    let planar = cell_pdf(cells.iu[i] as usize, cells.iv[i] as usize);
-                    *o = solid_angle(planar, cells.inv_jacobian[i]);
-                }
-            },
-        );
-    }
-
-    /// [`Self::pdf_cells`] with the cells' densities read a block at a time, in
-    /// vector lanes (`cell_pdfs`).
+    /// a `grid[0] × grid[1]` grid of cells: `cell_pdfs` of the block's cells at
+    /// the image points of [`Self::uv_blocks`], over the Jacobians. `prefetch`
+    /// asks for a cell's data a block before `cell_pdfs` reads it.
     #[inline(always)]
     fn pdf_cell_lanes(
         &self,
@@ -660,6 +624,21 @@ fn inversion_block(
             }
         },
     );
+}
+
+/// `cell_pdf` of each of `N` cells `[iu[j], iv[j]]`, one lane at a time (for
+/// densities without a vector-lane lookup).
+#[inline(always)]
+fn lane_by_lane<const N: usize>(
+    iu: &[u32; N],
+    iv: &[u32; N],
+    cell_pdf: impl Fn(usize, usize) -> f32,
+) -> [f32; N] {
+    let mut out = [0.0f32; N];
+    for (o, (&iu, &iv)) in out.iter_mut().zip(iu.iter().zip(iv)) {
+        *o = cell_pdf(iu as usize, iv as usize);
+    }
+    out
 }
 
 /// Directions per block in the batch queries' vectorized stage
