@@ -562,6 +562,22 @@ pub(crate) fn node_row_weights(j: usize, h: usize) -> [f32; 3] {
     [above as f32, (1.0 - above - below) as f32, below as f32]
 }
 
+/// The 4-point Gauss-Legendre rule on `[0, 1]`: its points and weights (exact for
+/// polynomials of degree 7).
+pub(super) const GL4_POINTS: [f64; 4] = [
+    0.069_431_844_202_973_71,
+    0.330_009_478_207_571_9,
+    0.669_990_521_792_428_1,
+    0.930_568_155_797_026_3,
+];
+/// The weights of [`GL4_POINTS`].
+pub(super) const GL4_WEIGHTS: [f64; 4] = [
+    0.173_927_422_568_726_9,
+    0.326_072_577_431_273_1,
+    0.326_072_577_431_273_1,
+    0.173_927_422_568_726_9,
+];
+
 /// Solid angle `W_j` attributed to each row by `lookup` (they sum to 4π).
 fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
     let hf = h as f64;
@@ -571,18 +587,8 @@ fn row_solid_angles(h: usize, lookup: Lookup) -> Vec<f64> {
             .collect(),
         Lookup::Node => node_row_solid_angles(h),
         Lookup::Bilinear => {
-            const GL_T: [f64; 4] = [
-                0.069_431_844_202_973_71,
-                0.330_009_478_207_571_9,
-                0.669_990_521_792_428_1,
-                0.930_568_155_797_026_3,
-            ];
-            const GL_W: [f64; 4] = [
-                0.173_927_422_568_726_9,
-                0.326_072_577_431_273_1,
-                0.326_072_577_431_273_1,
-                0.173_927_422_568_726_9,
-            ];
+            use GL4_POINTS as GL_T;
+            use GL4_WEIGHTS as GL_W;
             let mut weights = vec![0.0f64; h];
             for j in 0..h {
                 let centre = (j as f64 + 0.5) / hf;

@@ -244,18 +244,7 @@ fn node_lookup_heights(j: usize, h: usize) -> Vec<(f64, f64)> {
     if h < 2 {
         return efficiency_nodes().iter().map(|&tv| (tv, 1.0)).collect();
     }
-    const GL_X: [f64; 4] = [
-        0.069_431_844_202_973_71,
-        0.330_009_478_207_571_9,
-        0.669_990_521_792_428_1,
-        0.930_568_155_797_026_3,
-    ];
-    const GL_W: [f64; 4] = [
-        0.173_927_422_568_726_9,
-        0.326_072_577_431_273_1,
-        0.326_072_577_431_273_1,
-        0.173_927_422_568_726_9,
-    ];
+    use super::build::{GL4_POINTS as GL_X, GL4_WEIGHTS as GL_W};
     // The node's place in the row, in [0, 1].
     let a = (j as f64 / (h - 1) as f64 * h as f64 - j as f64).clamp(0.0, 1.0);
     let mut out = Vec::with_capacity(8);
