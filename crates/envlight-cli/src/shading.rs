@@ -41,7 +41,7 @@ pub enum Density<'a> {
     /// The light's own importance sampling.
     Light(&'a EnvironmentLight),
     /// The product sampler at the normal.
-    Product(ShadingPoint<'a>),
+    Product(Box<ShadingPoint<'a>>),
 }
 
 impl<'a> Density<'a> {
@@ -52,7 +52,7 @@ impl<'a> Density<'a> {
         normal: Option<Vec3>,
     ) -> Self {
         match (product, normal) {
-            (Some(p), Some(n)) => Density::Product(p.at(&Factor::cosine(n))),
+            (Some(p), Some(n)) => Density::Product(Box::new(p.at(&Factor::cosine(n)))),
             _ => Density::Light(light),
         }
     }

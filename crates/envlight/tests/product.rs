@@ -394,11 +394,14 @@ fn broken_weight_at_the_node_only_is_rejected() {
 
 #[test]
 fn broken_normal_ignored_is_rejected() {
-    // The sampler is conditioned on +z while the surface faces sideways: the
-    // lower half of the surface's hemisphere is never sampled.
+    // The sampler is conditioned on +z while the surface faces down: the
+    // surface's hemisphere is sampled only within the +z node's neighbourhood
+    // of the horizon. (A surface facing sideways no longer shows it: its lower
+    // half, the sky's dim ground, holds too little of the integral for the test
+    // to see at 1M samples since the sun is weighted at the point itself.)
     let sampler = ProductSampler::new(default_light(sky()), ProductOptions::default());
     let s = AtShadingPoint::new(&sampler, Factor::cosine(Vec3::new(0.0, 0.0, 1.0)));
-    let integrand = Integrand::clamped_cosine(Vec3::new(0.0, 0.8, -0.6));
+    let integrand = Integrand::clamped_cosine(Vec3::new(0.0, 0.0, -1.0));
     let sup = verify::support(&s, &integrand);
     let u = verify::unbiasedness(&s, &integrand, &[], 1_000_000, 44, Reference::Checked);
     println!("[{}]\n  {sup}\n  {u}", s.name());

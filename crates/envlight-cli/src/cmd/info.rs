@@ -363,9 +363,10 @@ impl Shading {
             .map(|p| AtShadingPoint::new(p, Factor::cosine(normal)));
         let integrand = Integrand::clamped_cosine(normal);
         // The checked rule (Gauss-Legendre, 16 or 36 points per texel over the
-        // lookup's radiance): the midpoint rule's 4 points per texel sit where the
-        // bilinear radiance and a piecewise-constant pdf agree best, and read the
-        // efficiency about 7% high.
+        // lookup's radiance), which a midpoint rule approaches as it is refined:
+        // a midpoint rule misses part of the quadratic term of (Y cos)²/p between
+        // texel centres and reads the efficiency high next to a sun (4 × 4 points
+        // a texel: 1-5% high; BENCHMARKS.md).
         let light_only = efficiency(light.as_ref(), &integrand, Reference::Checked);
         let product_efficiency = at.as_ref().map_or(0.0, |a| {
             efficiency(a, &integrand, Reference::Checked).efficiency

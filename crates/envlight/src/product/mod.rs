@@ -45,6 +45,7 @@
 //! measure-zero poles of a lat-long map, where it is 0 as for the light).
 
 mod bounds;
+mod bright;
 mod factor;
 mod fine;
 mod pick;
@@ -54,8 +55,11 @@ mod tests;
 
 pub use factor::Factor;
 
+use crate::distribution::CDF_ONE;
 use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
 use crate::math::{is_positive_finite, Vec3};
+use bounds::Direction;
+use bright::{Bright, Target, MAX_BRIGHT};
 use factor::reflect;
 use fine::Fine;
 use rayon::prelude::*;
@@ -140,6 +144,10 @@ const COSINE_FROM_ROUGHNESS: f32 = 0.45;
 /// Half the spacing of f32 values just below 1.
 const XI_HALF_QUANTUM: f64 = f32::EPSILON as f64 / 4.0;
 
+/// The least probability of a shading point's component (the tables, or a bright
+/// patch) with weight: one unit of a fixed-point CDF.
+const MIN_SHARE: f64 = 1.0 / CDF_ONE as f64;
+
 /// The largest f64 below 1.
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
@@ -185,6 +193,8 @@ const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 pub struct ProductSampler {
     light: Arc<EnvironmentLight>,
     fine: Fine,
+    /// The patches weighted at each shading point, not in the tables.
+    bright: Bright,
     /// The cosine's tables.
     cosine: Tables,
     /// One set per [`LOBE_ROUGHNESS`], built when a glossy factor first needs it.
@@ -208,10 +218,18 @@ impl ProductSampler {
         let lobe_grid = options
             .lobe_grid
             .unwrap_or(ProductOptions::DEFAULT_LOBE_GRID);
-        let cosine = Tables::new(&fine, normal_grid, Lobe::Cosine, options.bound);
+        let bright = Bright::new(&fine);
+        let cosine = Tables::new(
+            &fine,
+            normal_grid,
+            Lobe::Cosine,
+            options.bound,
+            &bright.mask(),
+        );
         Self {
             light,
             fine,
+            bright,
             cosine,
             lobes: Default::default(),
             lobe_grid,
@@ -231,7 +249,13 @@ impl ProductSampler {
                     alpha2: alpha * alpha,
                 };
                 let grid = self.lobe_grid * LOBE_GRID_SCALE[i] / 2;
-                Tables::new(&self.fine, grid.max(1), lobe, self.bound)
+                Tables::new(
+                    &self.fine,
+                    grid.max(1),
+                    lobe,
+                    self.bound,
+                    &self.bright.mask(),
+                )
             }),
         }
     }
@@ -269,7 +293,9 @@ impl ProductSampler {
 
     /// Bytes of sampling data held (the fine level and the tables; not the light).
     pub fn memory_bytes(&self) -> usize {
-        self.fine.memory_bytes() + self.built().map(Tables::memory_bytes).sum::<usize>()
+        self.fine.memory_bytes()
+            + self.bright.memory_bytes()
+            + self.built().map(Tables::memory_bytes).sum::<usize>()
     }
 
     /// The sampling state at a shading point with factor `factor`: which tables it
@@ -288,6 +314,9 @@ impl ProductSampler {
             factor: None,
             set: 0,
             mix: Mix::default(),
+            tables_share: 0.0,
+            bright: [0.0; MAX_BRIGHT],
+            anything: false,
         }
     }
 
@@ -377,16 +406,6 @@ impl ProductSampler {
             }
         }
     }
-
-    /// The planar density at image point `uv` for the tables `mix` of set `set`:
-    /// the patch's mixture probability times the light's density in it.
-    #[inline]
-    fn planar_density(&self, set: usize, mix: &Mix, uv: [f32; 2]) -> f32 {
-        match self.fine.locate(uv) {
-            Some((k, density)) => (self.tables(set).probability(mix, k) * density) as f32,
-            None => 0.0,
-        }
-    }
 }
 
 /// The sampling state at one shading point: the factor and the tables it mixes.
@@ -402,6 +421,13 @@ pub struct ShadingPoint<'a> {
     set: usize,
     /// Its tables mixed here.
     mix: Mix,
+    /// The probability that a sample comes from the tables (the rest from the
+    /// bright patches).
+    tables_share: f64,
+    /// Each bright patch's probability.
+    bright: [f64; MAX_BRIGHT],
+    /// Whether anything can be sampled.
+    anything: bool,
 }
 
 impl ShadingPoint<'_> {
@@ -421,22 +447,118 @@ impl ShadingPoint<'_> {
         self.given = Some(*factor);
         let (given, factor) = (factor, factor.normalized());
         self.factor = factor;
-        match &factor {
-            Some(f) => {
-                let sampler = self.sampler;
-                let (set, direction) = sampler.tables_for(f, given);
-                self.set = set;
-                self.mix = sampler.tables(set).mix(direction);
-                // A lobe's tables cover every lit patch; the cosine's say whether
-                // the surface sees any of them.
-                if set != 0 && !self.mix.is_empty() {
-                    let normal = sampler.light.world_to_local(f.normal());
-                    if sampler.cosine.mix(normal).is_empty() {
-                        self.mix = Mix::default();
-                    }
-                }
+        self.anything = false;
+        let Some(f) = &factor else {
+            self.mix = Mix::default();
+            return;
+        };
+        let sampler = self.sampler;
+        let light = &sampler.light;
+        let (set, direction) = sampler.tables_for(f, given);
+        self.set = set;
+        self.mix = sampler.tables(set).mix(direction);
+        let local = |v: Vec3| {
+            let d = light.world_to_local(v);
+            Direction::new([d.x as f64, d.y as f64, d.z as f64])
+        };
+        let normal = local(f.normal());
+        // The tables' weights are in units of the factor they follow; a lobe's
+        // leave out the cosine, which is about `n·r` over a narrow lobe (kept
+        // above α, where a grazing lobe's lit half still sees the surface).
+        let (target, scale) = match *f {
+            Factor::Glossy {
+                outgoing,
+                roughness,
+                normal: n,
+            } if set != 0 => {
+                let mirror = local(reflect(outgoing, n));
+                let alpha = roughness as f64;
+                let target = Target::Glossy {
+                    normal,
+                    mirror,
+                    alpha2: alpha * alpha,
+                };
+                (target, bounds::dot(normal.v, mirror.v).max(alpha))
             }
-            None => self.mix = Mix::default(),
+            _ => (Target::Cosine { normal }, 1.0),
+        };
+        // A lobe's tables cover every lit patch; the cosine's say whether the
+        // surface sees any of them.
+        if set != 0
+            && !self.mix.is_empty()
+            && sampler
+                .cosine
+                .mix(light.world_to_local(f.normal()))
+                .is_empty()
+        {
+            self.mix = Mix::default();
+        }
+        let tables = if self.mix.is_empty() {
+            0.0
+        } else {
+            sampler.tables(set).total(&self.mix) * scale
+        };
+        let bright = sampler
+            .bright
+            .weights(&target, sampler.bound, &mut self.bright);
+        let total = tables + bright;
+        if !(total > 0.0 && total.is_finite()) {
+            self.mix = Mix::default();
+            self.tables_share = 0.0;
+            return;
+        }
+        self.anything = true;
+        if bright <= 0.0 {
+            // Exactly 1: no ξ may reach for a bright patch.
+            self.tables_share = 1.0;
+            return;
+        }
+        // Every share with weight kept at least MIN_SHARE (one unit of a table's
+        // fixed-point CDF), so that the f32 pdf stays positive wherever a
+        // component has weight, however far apart the components' totals are.
+        let floor = |x: f64| if x > 0.0 { x.max(MIN_SHARE) } else { 0.0 };
+        let inv_total = 1.0 / total;
+        let brights = &mut self.bright[..sampler.bright.len()];
+        let mut sum = floor(tables * inv_total);
+        for b in brights.iter_mut() {
+            *b = floor(*b * inv_total);
+            sum += *b;
+        }
+        let inv_sum = 1.0 / sum;
+        self.tables_share = floor(tables * inv_total) * inv_sum;
+        for b in brights {
+            *b *= inv_sum;
+        }
+    }
+
+    /// The patch the mixed tables give for `x, y ∈ [0, 1)` (`x` picks one of the
+    /// four tables by its weight, `y` a patch from it), and what is left of both.
+    #[inline]
+    fn sample_tables(&self, x: f64, y: f64) -> (usize, [f64; 2]) {
+        // The table: the first whose running sum passes x, found without branches
+        // (the weights of a renderer's shading points are not predictable). A
+        // table of probability 0 ends where the one before it does, so it is never
+        // the first passed; the last with weight is taken if rounding leaves x past
+        // them all.
+        let p = &self.mix.probability;
+        let ends = [p[0], p[0] + p[1], p[0] + p[1] + p[2]];
+        let passed = ends.iter().map(|&e| (x >= e) as usize).sum::<usize>();
+        let m = passed.min(self.mix.last as usize);
+        let below = if m == 0 { 0.0 } else { ends[m - 1] };
+        let x = ((x - below) / p[m]).clamp(0.0, BELOW_ONE);
+        let tables = self.sampler.tables(self.set);
+        let (k, y) = tables.sample(self.mix.node[m], y);
+        tables.prefetch(&self.mix, k);
+        (k, [x, y])
+    }
+
+    /// The probability of patch `k` at this point: a bright patch's own, or the
+    /// tables' share times the mixture's.
+    #[inline]
+    fn patch_probability(&self, k: usize) -> f64 {
+        match self.sampler.bright.index(k) {
+            Some(b) => self.bright[b],
+            None => self.tables_share * self.sampler.tables(self.set).probability(&self.mix, k),
         }
     }
 
@@ -450,7 +572,7 @@ impl ShadingPoint<'_> {
     /// it mixes has weight. False means that no patch the factor can see (with
     /// the tables' bounds) is lit: then the pdf is 0 everywhere and so is `L f`.
     pub fn samples_anything(&self) -> bool {
-        !self.mix.is_empty()
+        self.anything
     }
 
     /// Draws a world direction for `ξ ∈ [0, 1)²` with density [`Self::pdf`]: `ξ₀`
@@ -462,7 +584,7 @@ impl ShadingPoint<'_> {
     /// `None` when nothing can be sampled ([`Self::samples_anything`] is false), or
     /// when the point falls exactly on a pole of a lat-long map (measure zero).
     pub fn sample(&self, xi: [f32; 2]) -> Option<LightSample> {
-        if self.mix.is_empty() {
+        if !self.anything {
             return None;
         }
         let sampler = self.sampler;
@@ -473,20 +595,24 @@ impl ShadingPoint<'_> {
         #[allow(clippy::manual_clamp)]
         let clamp = |x: f32| (x.max(0.0) as f64 + XI_HALF_QUANTUM).min(BELOW_ONE);
         let x = clamp(xi[0]);
-        // The table: the first whose running sum passes x, found without branches
-        // (the weights of a renderer's shading points are not predictable). A
-        // table of probability 0 ends where the one before it does, so it is never
-        // the first passed; the last with weight is taken if rounding leaves x past
-        // them all.
-        let p = &self.mix.probability;
-        let ends = [p[0], p[0] + p[1], p[0] + p[1] + p[2]];
-        let passed = ends.iter().map(|&e| (x >= e) as usize).sum::<usize>();
-        let m = passed.min(self.mix.last as usize);
-        let below = if m == 0 { 0.0 } else { ends[m - 1] };
-        let x = ((x - below) / p[m]).clamp(0.0, BELOW_ONE);
-        let tables = sampler.tables(self.set);
-        let (k, y) = tables.sample(self.mix.node[m], clamp(xi[1]));
-        tables.prefetch(&self.mix, k);
+        let (k, [x, y]) = if x < self.tables_share {
+            self.sample_tables((x / self.tables_share).min(BELOW_ONE), clamp(xi[1]))
+        } else {
+            // The bright patch: the first whose running sum (after the tables')
+            // passes x, or the last with weight if rounding leaves x past them all.
+            let bright = &sampler.bright;
+            let (mut b, mut start, mut end) = (0, self.tables_share, self.tables_share);
+            for (c, &p) in self.bright[..bright.len()].iter().enumerate() {
+                if p > 0.0 {
+                    (b, start, end) = (c, end, end + p);
+                    if x < end {
+                        break;
+                    }
+                }
+            }
+            let x = ((x - start) / self.bright[b]).clamp(0.0, BELOW_ONE);
+            (bright.patch(b), [x, clamp(xi[1])])
+        };
         let light = &sampler.light;
         let (uv, density) = sampler.fine.sample(k, [x, y], |uv| {
             light.image().prefetch(uv[0], uv[1]);
@@ -500,7 +626,7 @@ impl ShadingPoint<'_> {
         // pdf is evaluated where the caller will, at the returned direction, as
         // the light does.
         let pdf = match density {
-            Some(q) => (tables.probability(&self.mix, k) * q) as f32 / jacobian,
+            Some(q) => (self.patch_probability(k) * q) as f32 / jacobian,
             None => self.pdf(direction),
         };
         if !(jacobian > 0.0 && is_positive_finite(pdf)) {
@@ -521,12 +647,15 @@ impl ShadingPoint<'_> {
     /// lat-long map, and when nothing can be sampled.
     #[inline]
     pub fn pdf(&self, direction: Vec3) -> f32 {
-        if self.mix.is_empty() {
+        if !self.anything {
             return 0.0;
         }
         let light = &self.sampler.light;
         let (uv, inv_jacobian) = light.local_to_uv(light.world_to_local(direction));
-        let planar = self.sampler.planar_density(self.set, &self.mix, uv);
+        let planar = match self.sampler.fine.locate(uv) {
+            Some((k, density)) => (self.patch_probability(k) * density) as f32,
+            None => 0.0,
+        };
         solid_angle_density(planar, inv_jacobian)
     }
 }

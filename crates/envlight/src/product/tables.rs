@@ -47,6 +47,12 @@ pub(super) enum Lobe {
 /// give the same worst case over random normals, 0.01 the better one at the nodes.
 pub(super) const BOUND_SHARE: f64 = 0.01;
 
+/// At most this share of what the factor gives a node's table at its own direction
+/// is added by the floors: more would spend samples below the horizon of a
+/// surface facing the node's direction (up to 6% measured for a surface facing
+/// down under night.exr with the full share).
+pub(super) const FLOOR_BUDGET: f64 = 0.01;
+
 /// One table per node of an `n × n`-cell octahedral grid of directions
 /// (`(n + 1)²` nodes, on the cells' corners), over a fine level's patches: a
 /// fixed-point distribution, picked from by an exact alias table (module `pick`),
@@ -64,6 +70,9 @@ pub(super) struct Tables {
     empty: Vec<bool>,
     /// Whether any is (when none is, a shading point need not look).
     any_empty: bool,
+    /// Node `m`'s weights summed, `Σ_k P_k g_k` (see `fill_weights`): how much
+    /// of the product the table stands for, next to the bright patches'.
+    totals: Vec<f64>,
     /// The tables' widths transposed, patch-major: patch `k` of node `m` at
     /// `k (n + 1)² + m` (0 for an empty table). A pdf reads four neighbouring nodes
     /// of one patch, one or two cache lines here instead of four tables.
@@ -91,13 +100,14 @@ impl Mix {
 
 impl Tables {
     /// The tables of `lobe` over `fine`'s patches for an `n`-cell grid (`n ≥ 1`).
-    pub fn new(fine: &Fine, n: usize, lobe: Lobe, bound: PatchBound) -> Self {
+    /// Patches marked in `skip` get no weight in any table.
+    pub fn new(fine: &Fine, n: usize, lobe: Lobe, bound: PatchBound, skip: &[bool]) -> Self {
         let n = n.max(1);
         let patches = fine.power.len();
         let nodes = (n + 1) * (n + 1);
         let mut slots: Vec<Slot> = pick::large_table(nodes * patches);
         let mut by_node = vec![0u32; nodes * patches];
-        let empty = slots
+        let (empty, totals): (Vec<bool>, Vec<f64>) = slots
             .par_chunks_mut(patches)
             .zip(by_node.par_chunks_mut(patches))
             .enumerate()
@@ -105,14 +115,14 @@ impl Tables {
                 || vec![0.0f32; patches],
                 |weights, (node, (slots, widths))| {
                     let (axis, spread) = neighbourhood(n, node % (n + 1), node / (n + 1));
-                    fill_weights(fine, &axis, spread, lobe, bound, weights);
+                    let total = fill_weights(fine, &axis, spread, lobe, bound, skip, weights);
                     // An empty table: widths 0, and slots that pick nothing.
                     let empty = pick::fixed_point_widths(weights, widths) == 0.0;
                     pick::build(widths, slots);
-                    empty
+                    (empty, if empty { 0.0 } else { total })
                 },
             )
-            .collect::<Vec<bool>>();
+            .unzip();
         let mut widths: Vec<u32> = pick::large_table(patches * nodes);
         widths
             .par_chunks_mut(nodes)
@@ -128,6 +138,7 @@ impl Tables {
             slots,
             any_empty: empty.contains(&true),
             empty,
+            totals,
             widths,
         }
     }
@@ -209,6 +220,17 @@ impl Tables {
         sum * (1.0 / CDF_ONE as f64)
     }
 
+    /// The mixed tables' weight sums `Σ_m P_m W_m`: what the tables stand for at
+    /// the shading point, in the units of the factor times the patches' shares.
+    #[inline]
+    pub fn total(&self, mix: &Mix) -> f64 {
+        mix.node
+            .iter()
+            .zip(&mix.probability)
+            .map(|(&m, &p)| p * self.totals[m as usize])
+            .sum()
+    }
+
     /// Starts loading what [`Self::probability`] of patch `k` in `mix` reads.
     #[inline(always)]
     pub fn prefetch(&self, mix: &Mix, k: usize) {
@@ -225,7 +247,9 @@ impl Tables {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<Slot>() * self.slots.len() + 4 * self.widths.len() + self.empty.len()
+        std::mem::size_of::<Slot>() * self.slots.len()
+            + 4 * self.widths.len()
+            + 9 * self.empty.len()
     }
 
     /// Nodes (tables).
@@ -306,24 +330,29 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
     (Direction::new(axis), spread)
 }
 
-/// One node's weights over the patches: `P_k · max(f(centre_k), BOUND_SHARE · B_k)`
+/// One node's weights over the patches: `P_k · max(f(centre_k), t · BOUND_SHARE · B_k)`
 /// with `B_k` the upper bound of the factor over patch `k` and over every direction
 /// within the cone `spread` (`(sin, cos)` of its half-angle; `None` for the whole
 /// sphere) about `axis` (just `f(centre_k)` for the broken [`PatchBound::AxisOnly`]),
-/// as f32 relative to the largest, every positive weight kept positive.
+/// as f32 relative to the largest, every positive weight kept positive. Patches
+/// marked in `skip` (the bright ones, weighted at each shading point instead) get
+/// none. `t ≤ 1` keeps what the floors add within [`FLOOR_BUDGET`] of the weight
+/// the factor gives at the node. Returns the weights' sum `Σ P_k g_k`.
 fn fill_weights(
     fine: &Fine,
     axis: &Direction,
     spread: Option<(f64, f64)>,
     lobe: Lobe,
     bound: PatchBound,
+    skip: &[bool],
     out: &mut [f32],
-) {
-    let mut weights = vec![0.0f64; out.len()];
-    let patches = weights.iter_mut().zip(&fine.power).zip(&fine.regions);
-    for (((w, &power), region), centre) in patches.zip(&fine.centres) {
+) -> f64 {
+    // (P·value, P·upper) per patch.
+    let mut parts = vec![(0.0f64, 0.0f64); out.len()];
+    let patches = parts.iter_mut().zip(&fine.power).zip(&fine.regions);
+    for ((((part, &power), region), centre), &skip) in patches.zip(&fine.centres).zip(skip) {
         let Some(region) = region else { continue };
-        if power <= 0.0 {
+        if power <= 0.0 || skip {
             continue;
         }
         // cos of the smallest angle γ between the axis and the patch, then of
@@ -339,19 +368,38 @@ fn fill_weights(
             Lobe::Cosine => (centre.max(0.0), reach.max(0.0)),
             Lobe::Glossy { alpha2 } => (lobe_proxy(alpha2, centre), lobe_proxy(alpha2, reach)),
         };
-        let g = match bound {
-            PatchBound::Cone if upper > 0.0 => value.max(BOUND_SHARE * upper),
-            PatchBound::Cone => 0.0,
-            PatchBound::AxisOnly => value,
-        };
-        *w = power * g;
+        *part = (power * value, power * upper);
     }
-    let max = weights.iter().fold(0.0f64, |a, &b| a.max(b));
-    for (o, &w) in out.iter_mut().zip(&weights) {
+    // What the floors add, at full share: `Σ max(0, s B - f)`.
+    let valued: f64 = parts.iter().map(|p| p.0).sum();
+    let added: f64 = parts
+        .iter()
+        .map(|&(value, upper)| (BOUND_SHARE * upper - value).max(0.0))
+        .sum();
+    // For t ≤ 1, max(0, t s B - f) ≤ t max(0, s B - f) (as f ≥ 0): scaling the
+    // share by t scales what the floors add by at most t. A node that sees
+    // nothing keeps the full share (its table is floors only).
+    let t = if valued > 0.0 && added > FLOOR_BUDGET * valued {
+        FLOOR_BUDGET * valued / added
+    } else {
+        1.0
+    };
+    let weight = |(value, upper): (f64, f64)| match bound {
+        PatchBound::Cone if upper > 0.0 => value.max(t * BOUND_SHARE * upper),
+        PatchBound::Cone => 0.0,
+        PatchBound::AxisOnly => value,
+    };
+    let (total, max) = parts.iter().fold((0.0f64, 0.0f64), |(sum, max), &p| {
+        let w = weight(p);
+        (sum + w, max.max(w))
+    });
+    for (o, &p) in out.iter_mut().zip(&parts) {
+        let w = weight(p);
         *o = if w > 0.0 {
             ((w / max) as f32).max(f32::from_bits(1))
         } else {
             0.0
         };
     }
+    total
 }

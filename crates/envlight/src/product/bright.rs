@@ -1,0 +1,170 @@
+//! The bright patches: the few patches that hold the most light (a sun, a lamp),
+//! weighted at every shading point by the factor itself, at that point's own
+//! normal (and mirror direction), rather than through the grid's tables.
+//!
+//! A table mixes what its node sees. A shading point between nodes mixes four of
+//! them, so a bright patch that one node sees just above its horizon gets that
+//! node's share of samples even when the point's own surface cannot see it: a low
+//! sun put up to 19% of a surface's product samples below its horizon (issue 35).
+//! Weighted per point, a bright patch gets `P_k · max(f(c_k), s · B_k)`, with `f`
+//! the factor at the patch's centre of light and `B_k` the factor's exact upper
+//! bound over the patch for this normal (`s = BOUND_SHARE`): nothing when the
+//! patch is wholly below the horizon, something whenever any of it is above, and
+//! the factor's own value, cosine and lobe together, otherwise. The tables give
+//! these patches no weight; a shading point mixes the tables' component, weighted
+//! by the sum of the mixed tables' weights, with the bright patches' weights.
+
+use super::bounds::{dot, Direction, Region};
+use super::factor::lobe_proxy;
+use super::fine::Fine;
+use super::tables::BOUND_SHARE;
+use super::PatchBound;
+
+/// At most this many patches are bright: the cost of a new shading point grows
+/// with them (one bound and one dot product each).
+pub(super) const MAX_BRIGHT: usize = 16;
+
+/// A patch is bright when it holds at least this share of the light's density.
+pub(super) const BRIGHT_SHARE: f64 = 0.01;
+
+/// ... and lies within a cone of at most this half-angle (radians, 10°): the
+/// factor at a patch's centre of light stands for it only when the patch is
+/// small (the default patches are about 4° across from centre to corner). On
+/// coarse patch grids the tables, which mix four nodes' views, serve better.
+pub(super) const BRIGHT_MAX_HALF_ANGLE: f64 = 0.1745;
+
+/// One bright patch, with what its weight needs, stored together.
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    patch: u32,
+    power: f64,
+    region: Region,
+    centre: [f64; 3],
+}
+
+/// The bright patches of a fine level (see the module docs).
+#[derive(Debug, Clone)]
+pub(super) struct Bright {
+    /// Brightest first.
+    items: Vec<Item>,
+    /// Each patch's place in `items`, or [`Bright::NONE`].
+    of_patch: Vec<u8>,
+}
+
+/// The factor a shading point weights the bright patches by, in the light frame.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Target {
+    /// `max(0, n·ω)`.
+    Cosine { normal: Direction },
+    /// `max(0, n·ω) · D_α(r·ω)` (the lobe proxy of `factor`), `r` the mirror
+    /// direction.
+    Glossy {
+        normal: Direction,
+        mirror: Direction,
+        alpha2: f64,
+    },
+}
+
+impl Bright {
+    const NONE: u8 = u8::MAX;
+
+    /// The patches of `fine` holding at least [`BRIGHT_SHARE`] of its light
+    /// within [`BRIGHT_MAX_HALF_ANGLE`], at most [`MAX_BRIGHT`], brightest first
+    /// (ties by index).
+    pub fn new(fine: &Fine) -> Self {
+        let mut order: Vec<usize> = (0..fine.power.len())
+            .filter(|&k| {
+                fine.power[k] >= BRIGHT_SHARE
+                    && fine.regions[k]
+                        .is_some_and(|r| r.cone.cos_half >= BRIGHT_MAX_HALF_ANGLE.cos())
+            })
+            .collect();
+        order.sort_by(|&a, &b| fine.power[b].total_cmp(&fine.power[a]).then(a.cmp(&b)));
+        order.truncate(MAX_BRIGHT);
+        let mut of_patch = vec![Self::NONE; fine.power.len()];
+        let items = order
+            .iter()
+            .enumerate()
+            .map(|(b, &k)| {
+                of_patch[k] = b as u8;
+                Item {
+                    patch: k as u32,
+                    power: fine.power[k],
+                    region: fine.regions[k].expect("a bright patch is lit"),
+                    centre: fine.centres[k],
+                }
+            })
+            .collect();
+        Self { items, of_patch }
+    }
+
+    /// Which patches are bright, patch by patch.
+    pub fn mask(&self) -> Vec<bool> {
+        self.of_patch.iter().map(|&b| b != Self::NONE).collect()
+    }
+
+    /// Bright patches.
+    pub fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// The patch of bright patch `b`.
+    #[inline]
+    pub fn patch(&self, b: usize) -> usize {
+        self.items[b].patch as usize
+    }
+
+    /// Patch `k`'s place among the bright patches, if it is one.
+    #[inline(always)]
+    pub fn index(&self, k: usize) -> Option<usize> {
+        let b = self.of_patch[k];
+        (b != Self::NONE).then_some(b as usize)
+    }
+
+    /// Each bright patch's weight for `target` into `out` (the first
+    /// [`Self::len`] entries; the others are left as they are), and their sum.
+    #[inline]
+    pub fn weights(&self, target: &Target, bound: PatchBound, out: &mut [f64; MAX_BRIGHT]) -> f64 {
+        let mut total = 0.0;
+        for (o, item) in out.iter_mut().zip(&self.items) {
+            let (value, upper) = match target {
+                // The bound (at most 1 and its slack) matters only when the
+                // cosine at the centre is below its share of it.
+                Target::Cosine { normal } => {
+                    let value = dot(normal.v, item.centre);
+                    if value >= BOUND_SHARE * 1.001 && bound == PatchBound::Cone {
+                        *o = item.power * value;
+                        total += *o;
+                        continue;
+                    }
+                    (value.max(0.0), item.region.max_dot(normal).max(0.0))
+                }
+                Target::Glossy {
+                    normal,
+                    mirror,
+                    alpha2,
+                } => {
+                    let cos = dot(normal.v, item.centre).max(0.0);
+                    let cos_upper = item.region.max_dot(normal).max(0.0);
+                    (
+                        cos * lobe_proxy(*alpha2, dot(mirror.v, item.centre)),
+                        cos_upper * lobe_proxy(*alpha2, item.region.max_dot(mirror)),
+                    )
+                }
+            };
+            let g = match bound {
+                PatchBound::Cone if upper > 0.0 => value.max(BOUND_SHARE * upper),
+                PatchBound::Cone => 0.0,
+                PatchBound::AxisOnly => value,
+            };
+            *o = item.power * g;
+            total += *o;
+        }
+        total
+    }
+
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Item>() * self.items.len() + self.of_patch.len()
+    }
+}
