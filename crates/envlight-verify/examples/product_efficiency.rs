@@ -7,12 +7,10 @@
 //! (maps from `../shared/envmaps/`, plus `builtin:sky`).
 
 use envlight::light::{Density, Mapping};
-use envlight::load::{load, LoadOptions};
 use envlight::{
-    builtin, EnvImage, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
+    builtin, EnvImage, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler,
 };
-use envlight_verify::{efficiency, AtShadingPoint, Integrand, Reference};
-use std::path::Path;
+use envlight_verify::{efficiency, maps, product_normals, AtShadingPoint, Integrand, Reference};
 use std::sync::Arc;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -42,27 +40,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         Mapping::Equirectangular
     };
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
-    let mut maps: Vec<(String, EnvImage)> = vec![("builtin:sky".into(), builtin::sky(1024, 512))];
     let only: Option<Vec<String>> = std::env::var("MAPS")
         .ok()
         .map(|m| m.split(',').map(String::from).collect());
-    for file in [
-        "sunrise.exr",
-        "city.exr",
-        "studio.exr",
-        "courtyard.exr",
-        "night.exr",
-        "colorful_studio_2k.hdr",
-    ] {
-        if only.as_ref().is_some_and(|o| !o.iter().any(|x| x == file)) {
-            continue;
-        }
-        match load(&dir.join(file), &LoadOptions::default()) {
-            Ok(l) => maps.push((file.into(), l.image)),
-            Err(e) => eprintln!("skipping {file}: {e}"),
-        }
-    }
+    let wanted: Vec<&str> = maps::SHARED
+        .into_iter()
+        .filter(|file| only.as_ref().is_none_or(|o| o.iter().any(|x| x == file)))
+        .collect();
+    let mut maps: Vec<(String, EnvImage)> = vec![("builtin:sky".into(), builtin::sky(1024, 512))];
+    maps.extend(maps::shared(&wanted));
     println!(
         "| map | density | normal | own eff. (Y) | product eff. (Y·cos⁺) | light eff. (Y·cos⁺) | product / own | variance gain |"
     );
@@ -88,19 +74,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     ..Default::default()
                 },
             );
-            let brightest = light.brightest().1;
-            let k = 1.0 / 3f32.sqrt();
-            let mut normals = vec![
-                ("up".to_string(), Vec3::new(0.0, 0.0, 1.0)),
-                ("down".to_string(), Vec3::new(0.0, 0.0, -1.0)),
-                ("towards".to_string(), brightest),
-                ("away".to_string(), -brightest),
-                ("oblique".to_string(), Vec3::new(k, -k, k)),
-            ];
-            for i in 0..random {
-                let xi = envlight::rng::xi_2d(77, i as u64);
-                normals.push((format!("random {i}"), envlight::math::uniform_sphere(xi)));
-            }
+            let normals = product_normals(&light, random);
             for (label, n) in normals {
                 let at = AtShadingPoint::new(&sampler, Factor::cosine(n));
                 let g = at.integrand();

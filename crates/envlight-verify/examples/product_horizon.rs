@@ -7,35 +7,11 @@
 //! `cargo run --release -p envlight-verify --example product_horizon [-- --random N] [--samples N] [--grid N]`
 //! (maps from `../shared/envmaps/`; `MAPS=a,b` keeps some).
 
-use envlight::load::{load, LoadOptions};
 use envlight::{
     builtin, EnvImage, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
 };
-use envlight_verify::{efficiency, AtShadingPoint, Reference};
-use std::path::Path;
+use envlight_verify::{efficiency, maps, product_normals, AtShadingPoint, Reference};
 use std::sync::Arc;
-
-/// The mean of each `f × f` block of `image` (both sides divisible by `f`).
-fn box_filter(image: &EnvImage, f: usize) -> EnvImage {
-    let (w, h) = (image.width() / f, image.height() / f);
-    let src = image.texels();
-    let mut out = vec![[0.0f32; 3]; w * h];
-    for (j, row) in out.chunks_mut(w).enumerate() {
-        for (i, o) in row.iter_mut().enumerate() {
-            let mut sum = [0.0f64; 3];
-            for y in 0..f {
-                for x in 0..f {
-                    let t = src[(j * f + y) * image.width() + i * f + x];
-                    for c in 0..3 {
-                        sum[c] += t[c] as f64;
-                    }
-                }
-            }
-            *o = sum.map(|s| (s / (f * f) as f64) as f32);
-        }
-    }
-    EnvImage::new(w, h, out).expect("a box-filtered image is valid")
-}
 
 /// A dim sky with a bright sun disc 3° above the horizon (0.5° radius).
 fn low_sun(width: usize, height: usize) -> EnvImage {
@@ -74,7 +50,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let random = arg(&args, "--random").unwrap_or(24);
     let samples = arg(&args, "--samples").unwrap_or(1 << 17);
     let normal_grid = arg(&args, "--grid");
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
     let only: Option<Vec<String>> = std::env::var("MAPS")
         .ok()
         .map(|m| m.split(',').map(String::from).collect());
@@ -84,22 +59,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("low sun".into(), low_sun(1024, 512)),
         ("low sun 256".into(), low_sun(256, 128)),
     ];
-    for file in [
-        "sunrise.exr",
-        "city.exr",
-        "studio.exr",
-        "courtyard.exr",
-        "night.exr",
-        "colorful_studio_2k.hdr",
-    ] {
-        match load(&dir.join(file), &LoadOptions::default()) {
-            Ok(l) => {
-                let small = box_filter(&l.image, l.image.width() / 256);
-                maps.push((file.into(), l.image));
-                maps.push((format!("{file} 256"), small));
-            }
-            Err(e) => println!("skipping {file}: {e}"),
-        }
+    for (file, image) in maps::shared(&maps::SHARED) {
+        let small = maps::box_filter(&image, image.width() / 256);
+        maps.push((file.clone(), image));
+        maps.push((format!("{file} 256"), small));
     }
     maps.retain(|(name, _)| {
         only.as_ref()
@@ -122,22 +85,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ..Default::default()
             },
         );
-        let brightest = light.brightest().1;
-        let k = 1.0 / 3f32.sqrt();
-        let mut normals = vec![
-            ("+z".to_string(), Vec3::new(0.0, 0.0, 1.0)),
-            ("-z".to_string(), Vec3::new(0.0, 0.0, -1.0)),
-            ("+x".to_string(), Vec3::new(1.0, 0.0, 0.0)),
-            ("-x".to_string(), Vec3::new(-1.0, 0.0, 0.0)),
-            ("+y".to_string(), Vec3::new(0.0, 1.0, 0.0)),
-            ("-y".to_string(), Vec3::new(0.0, -1.0, 0.0)),
-            ("towards".to_string(), brightest),
-            ("away".to_string(), -brightest),
-            ("oblique".to_string(), Vec3::new(k, -k, k)),
-        ];
-        for i in 0..random {
-            let xi = envlight::rng::xi_2d(77, i as u64);
-            normals.push((format!("random {i}"), envlight::math::uniform_sphere(xi)));
+        let mut normals = product_normals(&light, random);
+        for (label, n) in [
+            ("+x", [1.0, 0.0, 0.0]),
+            ("-x", [-1.0, 0.0, 0.0]),
+            ("+y", [0.0, 1.0, 0.0]),
+            ("-y", [0.0, -1.0, 0.0]),
+        ] {
+            normals.push((label.to_string(), Vec3::from(n)));
         }
         let mut worst = (0.0f64, String::new(), Vec3::new(0.0, 0.0, 1.0));
         let mut sum = 0.0;

@@ -62,8 +62,8 @@ pub use checks::consistency::{consistency, Consistency};
 pub use checks::normalisation::{normalisation, Normalisation};
 pub use checks::support::{support, Support};
 pub use checks::unbiasedness::{
-    efficiency, lobe_normals, unbiasedness, Efficiency, Estimate, Reference, Unbiasedness,
-    MASS_RESOLUTION, MAX_LOBES,
+    efficiency, lobe_normals, midpoint_moments, unbiasedness, Efficiency, Estimate,
+    MidpointMoments, Reference, Unbiasedness, MASS_RESOLUTION, MAX_LOBES,
 };
 pub use checks::warp::{chi_square_warp, WarpChiSquare};
 pub use integrand::Integrand;
@@ -72,7 +72,7 @@ pub use portal::{
     assert_portal_invariants, run_portal, AtPortalPoint, PortalConfig, PortalReport, PortalVariant,
     Quad, PORTAL_EDGE_BAND,
 };
-pub use product::AtShadingPoint;
+pub use product::{product_normals, AtShadingPoint};
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};

@@ -67,3 +67,49 @@ fn from_fn(w: usize, h: usize, f: impl FnMut(usize, usize) -> [f32; 3]) -> EnvIm
         Err(e) => panic!("synthetic map {w}x{h}: {e}"),
     }
 }
+
+/// The real maps in the repository's `shared/envmaps` (with their licences there).
+pub const SHARED: [&str; 6] = [
+    "sunrise.exr",
+    "city.exr",
+    "studio.exr",
+    "courtyard.exr",
+    "night.exr",
+    "colorful_studio_2k.hdr",
+];
+
+/// The maps `files` of `shared/envmaps` that can be read, by file name; one
+/// printed line for each that cannot (the directory is beside the repository,
+/// and absent on some machines).
+pub fn shared(files: &[&str]) -> Vec<(String, EnvImage)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
+    let options = envlight::load::LoadOptions::default();
+    files
+        .iter()
+        .filter_map(
+            |file| match envlight::load::load(&dir.join(file), &options) {
+                Ok(l) => Some((file.to_string(), l.image)),
+                Err(e) => {
+                    println!("skipping {file}: {e}");
+                    None
+                }
+            },
+        )
+        .collect()
+}
+
+/// The `f × f` box-filter average of `image` (`f` divides both sides).
+pub fn box_filter(image: &EnvImage, f: usize) -> EnvImage {
+    let (w, h) = (image.width() / f, image.height() / f);
+    from_fn(w, h, |x, y| {
+        let mut sum = [0.0f64; 3];
+        for sy in 0..f {
+            for texel in &image.row(y * f + sy)[x * f..(x + 1) * f] {
+                for (s, &t) in sum.iter_mut().zip(texel) {
+                    *s += t as f64;
+                }
+            }
+        }
+        sum.map(|s| (s / (f * f) as f64) as f32)
+    })
+}

@@ -101,3 +101,23 @@ impl SphereSampler for AtShadingPoint<'_> {
         self.light().radiance_batch(directions, out)
     }
 }
+
+/// The normals the product examples measure at: up, down, towards and away from
+/// `light`'s brightest texel, an oblique one, and `random` uniform ones (fixed
+/// seed), each with a label.
+pub fn product_normals(light: &EnvironmentLight, random: usize) -> Vec<(String, Vec3)> {
+    let brightest = light.brightest().1;
+    let k = 1.0 / 3f32.sqrt();
+    let mut normals = vec![
+        ("up".to_string(), Vec3::new(0.0, 0.0, 1.0)),
+        ("down".to_string(), Vec3::new(0.0, 0.0, -1.0)),
+        ("towards".to_string(), brightest),
+        ("away".to_string(), -brightest),
+        ("oblique".to_string(), Vec3::new(k, -k, k)),
+    ];
+    for i in 0..random {
+        let xi = envlight::rng::xi_2d(77, i as u64);
+        normals.push((format!("random {i}"), envlight::math::uniform_sphere(xi)));
+    }
+    normals
+}

@@ -10,54 +10,27 @@
 //! `info`; `examples/efficiency_convergence.rs` shows the whole table on the shared
 //! maps, and this test the same law on the built-in sky.
 
-use envlight::color::luminance;
 use envlight::{
     builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
 };
-use envlight_verify::{efficiency, AtShadingPoint, Reference, SphereSampler};
-use std::f64::consts::PI;
+use envlight_verify::{efficiency, midpoint_moments, AtShadingPoint, Reference};
 use std::sync::Arc;
 
-/// `(∫g)² / ∫g²/p` by the midpoint rule with `m × m` points per texel of the
-/// `w × h` lat-long grid (`dω = 2π² sin θ du dv`), `g = Y(L(ω))·max(0, n·ω)`
-/// with radiance and pdf from the sampler's public queries. Written apart from
-/// the harness's [`envlight_verify::Quadrature`] on purpose.
-fn midpoint_efficiency(at: &AtShadingPoint, [w, h]: [usize; 2], n: Vec3, m: usize) -> f64 {
-    let (nu, nv) = (w * m, h * m);
-    let (du, dv) = (1.0 / nu as f64, 1.0 / nv as f64);
-    let (mut first, mut second) = (0.0f64, 0.0f64);
-    let mut pdf = vec![0.0f32; nu];
-    let mut radiance = vec![[0.0f32; 3]; nu];
-    for r in 0..nv {
-        let (st, ct) = (PI * (r as f64 + 0.5) * dv).sin_cos();
-        let dw = 2.0 * PI * PI * st * du * dv;
-        let directions: Vec<Vec3> = (0..nu)
-            .map(|c| {
-                let (sp, cp) = (2.0 * PI * (c as f64 + 0.5) * du).sin_cos();
-                Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32)
-            })
-            .collect();
-        at.pdf_batch(&directions, &mut pdf);
-        at.radiance_batch(&directions, &mut radiance);
-        for ((d, l), &p) in directions.iter().zip(&radiance).zip(&pdf) {
-            let g = luminance(*l) as f64 * n.dot(*d).max(0.0) as f64;
-            if g > 0.0 {
-                assert!(p > 0.0, "lit direction {d:?} with pdf 0");
-                first += g * dw;
-                second += g * g / p as f64 * dw;
-            }
-        }
-    }
-    first * first / second
+/// `(∫g)² / ∫g²/p` by [`midpoint_moments`] (written apart from the harness's
+/// quadrature), with no lit point left at pdf 0.
+fn midpoint_efficiency(at: &AtShadingPoint, size: [usize; 2], n: Vec3, m: usize) -> f64 {
+    let moments = midpoint_moments(at, size, n, m, None);
+    assert_eq!(moments.unsampled, 0, "lit points with pdf 0");
+    moments.efficiency()
 }
 
 /// The built-in sky at 256 × 128 (its sun about one texel wide), the surface
-/// facing the brightest texel, the product sampler's pdf. Measured (2026-12-03):
-/// Checked 0.70006; midpoint 2×2 0.79887, 4×4 0.72297, 8×8 0.70569, 16×16 0.70147
-/// per texel. The midpoint's excess shrinks 4.31×, 4.07×, 3.99× per halving of
-/// the spacing, Richardson's extrapolation of 8×8 and 16×16 lands on Checked, and
-/// the 4×4 rule's excess, 0.0229 (3.3%), is what the `h²` law fitted on the finer
-/// levels predicts. Replacing Checked by [`Reference::Midpoint`] (2×2 points per
+/// facing the brightest texel, the product sampler's pdf. Measured (2026-12-03,
+/// with the bright patches): Checked 0.70013; midpoint 2×2 0.79893, 4×4 0.72304,
+/// 8×8 0.70576, 16×16 0.70154 per texel. The midpoint's excess shrinks 4.31×,
+/// 4.07×, 3.99× per halving of the spacing, Richardson's extrapolation of 8×8 and
+/// 16×16 lands on Checked (-3.5e-6), and the 4×4 rule's excess, 0.0229 (3.3%), is
+/// what the `h²` law fitted on the finer levels predicts (0.0225). Replacing Checked by [`Reference::Midpoint`] (2×2 points per
 /// texel) fails the test.
 #[test]
 fn midpoint_efficiency_converges_to_the_checked_rule() {

@@ -10,6 +10,7 @@ use crate::{QUADRATURE_SLACK, Z_TOLERANCE};
 use envlight::color::luminance;
 use envlight::Vec3;
 use rayon::prelude::*;
+use std::f64::consts::PI;
 use std::fmt;
 
 /// One Monte Carlo estimate of `∫ Y(L) f dω` against its quadrature.
@@ -362,6 +363,86 @@ pub fn efficiency(
         integral,
         efficiency: efficiency_of(integral, second),
         rule: q.describe(),
+    }
+}
+
+/// `∫g dω` and `∫g²/p dω` for `g = Y·max(0, n·ω)` and `s`'s pdf by the plain
+/// midpoint rule, `m × m` points per texel of a `w × h` lat-long grid
+/// (`dω = 2π² sin θ du dv`), with `s`'s radiance or, given `texels` (a `w × h`
+/// image), the value of the texel holding each point (a nearest lookup). Written
+/// apart from [`Quadrature`] on purpose: it is what an outside check would do,
+/// and it converges to [`Reference::Checked`] as `m` grows, at `O(h²)`
+/// (`tests/efficiency_quadrature.rs`).
+pub fn midpoint_moments(
+    s: &dyn SphereSampler,
+    [w, h]: [usize; 2],
+    n: Vec3,
+    m: usize,
+    texels: Option<&envlight::EnvImage>,
+) -> MidpointMoments {
+    let (nu, nv) = (w * m, h * m);
+    let (du, dv) = (1.0 / nu as f64, 1.0 / nv as f64);
+    let rows: Vec<MidpointMoments> = (0..nv)
+        .into_par_iter()
+        .map(|r| {
+            let (st, ct) = (PI * (r as f64 + 0.5) * dv).sin_cos();
+            let dw = 2.0 * PI * PI * st * du * dv;
+            let directions: Vec<Vec3> = (0..nu)
+                .map(|c| {
+                    let (sp, cp) = (2.0 * PI * (c as f64 + 0.5) * du).sin_cos();
+                    Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32)
+                })
+                .collect();
+            let mut pdf = vec![0.0f32; nu];
+            s.pdf_batch(&directions, &mut pdf);
+            let mut radiance = vec![[0.0f32; 3]; nu];
+            match texels {
+                Some(image) => {
+                    let row = image.row(r / m);
+                    for (c, l) in radiance.iter_mut().enumerate() {
+                        *l = row[c / m];
+                    }
+                }
+                None => s.radiance_batch(&directions, &mut radiance),
+            }
+            let mut acc = MidpointMoments::default();
+            for ((d, l), &p) in directions.iter().zip(&radiance).zip(&pdf) {
+                let g = luminance(*l) as f64 * n.dot(*d).max(0.0) as f64;
+                if g > 0.0 {
+                    acc.integral += g * dw;
+                    if p > 0.0 {
+                        acc.second += g * g / p as f64 * dw;
+                    } else {
+                        acc.unsampled += 1;
+                    }
+                }
+            }
+            acc
+        })
+        .collect();
+    rows.iter()
+        .fold(MidpointMoments::default(), |a, r| MidpointMoments {
+            integral: a.integral + r.integral,
+            second: a.second + r.second,
+            unsampled: a.unsampled + r.unsampled,
+        })
+}
+
+/// What [`midpoint_moments`] sums.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MidpointMoments {
+    /// `∫ g dω`.
+    pub integral: f64,
+    /// `∫ g²/p dω` over the points where `p > 0`.
+    pub second: f64,
+    /// Points with `g > 0` and `p = 0`.
+    pub unsampled: usize,
+}
+
+impl MidpointMoments {
+    /// `(∫g)² / ∫g²/p`.
+    pub fn efficiency(&self) -> f64 {
+        self.integral * self.integral / self.second
     }
 }
 

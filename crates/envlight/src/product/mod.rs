@@ -457,11 +457,9 @@ impl ShadingPoint<'_> {
         let (set, direction) = sampler.tables_for(f, given);
         self.set = set;
         self.mix = sampler.tables(set).mix(direction);
-        let local = |v: Vec3| {
-            let d = light.world_to_local(v);
-            Direction::new([d.x as f64, d.y as f64, d.z as f64])
-        };
-        let normal = local(f.normal());
+        let local = |d: Vec3| Direction::new([d.x as f64, d.y as f64, d.z as f64]);
+        let normal_light = light.world_to_local(f.normal());
+        let normal = local(normal_light);
         // The tables' weights are in units of the factor they follow; a lobe's
         // leave out the cosine, which is about `n·r` over a narrow lobe (kept
         // above α, where a grazing lobe's lit half still sees the surface).
@@ -471,7 +469,7 @@ impl ShadingPoint<'_> {
                 roughness,
                 normal: n,
             } if set != 0 => {
-                let mirror = local(reflect(outgoing, n));
+                let mirror = local(light.world_to_local(reflect(outgoing, n)));
                 let alpha = roughness as f64;
                 let target = Target::Glossy {
                     normal,
@@ -484,13 +482,7 @@ impl ShadingPoint<'_> {
         };
         // A lobe's tables cover every lit patch; the cosine's say whether the
         // surface sees any of them.
-        if set != 0
-            && !self.mix.is_empty()
-            && sampler
-                .cosine
-                .mix(light.world_to_local(f.normal()))
-                .is_empty()
-        {
+        if set != 0 && !self.mix.is_empty() && sampler.cosine.mix(normal_light).is_empty() {
             self.mix = Mix::default();
         }
         let tables = if self.mix.is_empty() {

@@ -384,17 +384,17 @@ fn fill_weights(
     } else {
         1.0
     };
-    let weight = |(value, upper): (f64, f64)| match bound {
-        PatchBound::Cone if upper > 0.0 => value.max(t * BOUND_SHARE * upper),
-        PatchBound::Cone => 0.0,
-        PatchBound::AxisOnly => value,
-    };
-    let (total, max) = parts.iter().fold((0.0f64, 0.0f64), |(sum, max), &p| {
-        let w = weight(p);
-        (sum + w, max.max(w))
-    });
-    for (o, &p) in out.iter_mut().zip(&parts) {
-        let w = weight(p);
+    let weights: Vec<f64> = parts
+        .iter()
+        .map(|&(value, upper)| match bound {
+            PatchBound::Cone if upper > 0.0 => value.max(t * BOUND_SHARE * upper),
+            PatchBound::Cone => 0.0,
+            PatchBound::AxisOnly => value,
+        })
+        .collect();
+    let total: f64 = weights.iter().sum();
+    let max = weights.iter().fold(0.0f64, |m, &w| m.max(w));
+    for (o, &w) in out.iter_mut().zip(&weights) {
         *o = if w > 0.0 {
             ((w / max) as f32).max(f32::from_bits(1))
         } else {
