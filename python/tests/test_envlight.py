@@ -12,21 +12,10 @@ import numpy as np
 import pytest
 
 import envlight
+from _maps import sky
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 ENVMAPS = ROOT.parent / "shared" / "envmaps"
-
-
-def sky(h=32, w=64, seed=1):
-    """A small map: a smooth sky, a bright sun, some black texels."""
-    rng = np.random.default_rng(seed)
-    v = (np.arange(h) + 0.5) / h
-    rgb = np.empty((h, w, 3), np.float32)
-    rgb[...] = (0.2 + 0.8 * np.cos(np.pi * v / 2))[:, None, None] * np.array([0.5, 0.7, 1.0], np.float32)
-    rgb[h // 2 :, :, :] *= 0.3
-    rgb[5:7, 40:42, :] = 500.0
-    rgb[rng.random((h, w)) < 0.05] = 0.0
-    return rgb
 
 
 def write_pfm(path, rgb):
