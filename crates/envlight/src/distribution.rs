@@ -585,6 +585,19 @@ pub struct Distribution1D {
     pdf_scale: f64,
 }
 
+/// A [`Distribution2D`]'s cell densities as tables (see
+/// [`Distribution2D::cell_tables`]): cell `(iu, iv)` has the density
+/// `(cdf[iv (nu + 1) + iu + 1] - cdf[iv (nu + 1) + iu]) ·
+/// (marginal[iv + 1] - marginal[iv]) · pdf_scale`, the product taken in f64 and
+/// rounded to f32 once.
+pub(crate) struct CellTables<'a> {
+    pub conditional_cdf: &'a [u32],
+    pub marginal_cdf: &'a [u32],
+    pub nu: usize,
+    pub nv: usize,
+    pub pdf_scale: f64,
+}
+
 /// A continuous sample of a 1D distribution.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample1D {
@@ -983,6 +996,19 @@ impl Distribution2D {
     pub(crate) fn prefetch_cell(&self, iu: usize, iv: usize) {
         let at = iv.wrapping_mul(self.nu + 1).wrapping_add(iu);
         prefetch_ptr(self.conditional_cdf.as_ptr().wrapping_add(at));
+    }
+
+    /// The tables a cell's density is read from, for kernels that gather them
+    /// themselves (the AVX-512 batch queries): each row's conditional CDF, the
+    /// marginal CDF, the grid's size and the scale of [`Self::cell_pdfs_in_grid`].
+    pub(crate) fn cell_tables(&self) -> CellTables<'_> {
+        CellTables {
+            conditional_cdf: &self.conditional_cdf,
+            marginal_cdf: &self.marginal.cdf,
+            nu: self.nu,
+            nv: self.nv,
+            pdf_scale: self.pdf_scale,
+        }
     }
 
     /// [`Self::cell_pdf`] of a cell known to be in the grid (`iu < nu`, `iv < nv`,

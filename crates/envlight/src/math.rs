@@ -199,7 +199,7 @@ const fn sin_cos_pi_table() -> [[f32; 2]; 256] {
 }
 
 /// `tan(π/8)`: above it, atan's argument is reflected about 1 (see [`atan2_pi`]).
-const TAN_PI_8: f32 = 0.414_213_57;
+pub(crate) const TAN_PI_8: f32 = 0.414_213_57;
 
 /// `atan(t) = t·P(t²)` on `[0, tan(π/8)]`, fitted by iteratively reweighted least
 /// squares on Chebyshev nodes (relative error 6·10⁻¹⁰, far below f32 rounding).
@@ -213,7 +213,7 @@ const ATAN_P: [f64; 6] = [
 ];
 
 /// [`ATAN_P`] divided by π and rounded to f32: `atan(t) / π = t·Q(t²)`.
-const ATAN_PI_Q: [f32; 6] = {
+pub(crate) const ATAN_PI_Q: [f32; 6] = {
     let pi = std::f64::consts::PI;
     [
         (ATAN_P[0] / pi) as f32,

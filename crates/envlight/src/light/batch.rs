@@ -282,8 +282,8 @@ impl EnvironmentLight {
 
     wide_kernels! {
         sample_chunk_wide => sample_chunk([f32; 2], Option<LightSample>);
-        pdf_chunk_wide => pdf_chunk(Vec3, f32);
-        radiance_chunk_wide => radiance_chunk(Vec3, [f32; 3]);
+        pdf_chunk_wide => pdf_chunk(Vec3, f32) or super::avx512::pdf_chunk;
+        radiance_chunk_wide => radiance_chunk(Vec3, [f32; 3]) or super::avx512::radiance_chunk;
     }
 
     /// [`Self::pdf_batch`] on one chunk, on the current thread. For the
@@ -731,9 +731,11 @@ struct WideKernels<L, I, O> {
 }
 
 /// For each `name => kernel(I, O)`, a method `name()` returning `kernel` compiled
-/// for AVX2 and for AVX-512 ([`WideKernels`]).
+/// for AVX2 and for AVX-512 ([`WideKernels`]). With `or special`, the AVX-512
+/// kernel first offers the chunk to `special` (a hand-written kernel returning
+/// whether it applied to this light).
 macro_rules! wide_kernels {
-    ($($name:ident => $kernel:ident($in:ty, $out:ty);)*) => {$(
+    ($($name:ident => $kernel:ident($in:ty, $out:ty) $(or $special:path)?;)*) => {$(
         #[doc = concat!("[`Self::", stringify!($kernel), "`] compiled for wider vectors.")]
         fn $name() -> WideKernels<Self, $in, $out> {
             #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
@@ -745,6 +747,12 @@ macro_rules! wide_kernels {
                 target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")
             )]
             fn avx512(light: &EnvironmentLight, input: &[$in], out: &mut [$out]) {
+                $(
+                    #[cfg(target_arch = "x86_64")]
+                    if $special(light, input, out) {
+                        return;
+                    }
+                )?
                 light.$kernel(input, out)
             }
             WideKernels { avx2, avx512 }
@@ -793,6 +801,11 @@ mod tests {
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(1.0, -1e-7, 0.0),
             Vec3::new(f32::NAN, 0.0, 1.0),
+            Vec3::new(1e-30, 0.0, 1.0),
+            Vec3::new(-1.0, -1e-20, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+            Vec3::new(1e30, -1e30, 1e30),
+            Vec3::new(f32::INFINITY, 0.0, 0.0),
         ]);
         let xi: Vec<[f32; 2]> = (0..1_003u64).map(|k| crate::rng::xi_2d(6, k)).collect();
         let widths: Vec<VectorWidth> = [
@@ -841,20 +854,29 @@ mod tests {
                 Mapping::EqualArea,
             ),
         ] {
-            let options = LightOptions {
-                sampler,
-                density,
-                lookup,
-                mapping,
-                rotation: Rotation::about_z_degrees(20.0),
-                ..Default::default()
-            };
-            for (image, width) in images
-                .iter()
-                .flat_map(|i| widths.iter().map(move |w| (i, *w)))
-            {
+            // Rotated and not: the AVX-512 kernels skip the rotation for the identity.
+            let cases = [0.0, 20.0].into_iter().flat_map(|degrees| {
+                let widths = &widths;
+                images.iter().flat_map(move |i| {
+                    widths
+                        .iter()
+                        .map(move |w| (Rotation::about_z_degrees(degrees), i, *w))
+                })
+            });
+            for (rotation, image, width) in cases {
+                let options = LightOptions {
+                    sampler,
+                    density,
+                    lookup,
+                    mapping,
+                    rotation,
+                    ..Default::default()
+                };
                 let light = EnvironmentLight::new(image.clone(), options).unwrap();
-                let case = format!("{sampler:?} {density:?} {width:?} {}", image.width());
+                let case = format!(
+                    "{sampler:?} {density:?} {lookup:?} {width:?} {} {rotation:?}",
+                    image.width()
+                );
                 let mut pdfs = vec![0.0; dirs.len()];
                 let mut radiance = vec![[0.0; 3]; dirs.len()];
                 let mut samples = vec![None; xi.len()];

@@ -23,6 +23,8 @@
 //! submodules hold its construction (`build`), its batch queries (`batch`) and
 //! the efficiency quadrature (`efficiency`).
 
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 mod batch;
 mod build;
 pub(crate) use build::bilinear_nodes;

@@ -1,0 +1,404 @@
+//! Hand-written AVX-512 kernels for the two batch queries a renderer makes most:
+//! `pdf_batch` of the piecewise-constant inversion sampler and `radiance_batch`
+//! with the bilinear lookup, both on the lat-long map. They run the same IEEE
+//! operations in the same order as the lane loops of `batch.rs` (no fused
+//! multiply-add), so every value is bit for bit the single query's; what changes
+//! is how the data moves. The compiler's version of those loops deinterleaves the
+//! directions lane by lane, extracts each lane's cell index for a prefetch and
+//! reads the tables with scalar loads; here 16 directions are three loads and six
+//! permutes, and every table and texel read is one gather for 16 lanes, whose
+//! cache misses the CPU overlaps by itself.
+//!
+//! Each kernel returns `false` without touching `out` where it does not apply
+//! (another sampler, density, mapping or lookup, or tables too large for 32-bit
+//! gather indices); the caller then runs the generic kernel.
+
+use super::{EnvironmentLight, Mapping, Planar};
+use crate::distribution::ONE_MINUS_EPSILON;
+use crate::image::Lookup;
+use crate::mapping::EQUIRECT_JACOBIAN;
+use crate::math::{len_f32, Vec3, ATAN_PI_Q, TAN_PI_8};
+use std::arch::x86_64::*;
+
+/// Directions per vector.
+const LANES: usize = 16;
+
+/// [`EnvironmentLight::pdf_batch`] on one chunk, for the inversion sampler's
+/// piecewise-constant density on the lat-long map; `false` (and nothing written)
+/// for any other light.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+pub(super) fn pdf_chunk(light: &EnvironmentLight, dirs: &[Vec3], out: &mut [f32]) -> bool {
+    let Planar::Inversion(d) = &light.planar else {
+        return false;
+    };
+    let t = d.cell_tables();
+    if light.options.mapping != Mapping::Equirectangular
+        || t.conditional_cdf.len() > i32::MAX as usize
+    {
+        return false;
+    }
+    let frame = Frame::of(light);
+    let stride = _mm512_set1_epi32((t.nu + 1) as i32);
+    let one = _mm512_set1_epi32(1);
+    let (nu, nv) = (_mm512_set1_ps(len_f32(t.nu)), _mm512_set1_ps(len_f32(t.nv)));
+    let last = |n: usize| _mm512_set1_epi32((n - 1).min(i32::MAX as usize) as i32);
+    let (last_u, last_v) = (last(t.nu), last(t.nv));
+    let scale = _mm512_set1_pd(t.pdf_scale);
+    let infinity = _mm512_set1_ps(f32::INFINITY);
+    let (cdf, marginal) = (t.conditional_cdf.as_ptr(), t.marginal_cdf.as_ptr());
+    for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+        let [x, y, z] = load_directions(dirs);
+        let (u, v, csc) = frame.to_uv(x, y, z);
+        let iu = floor_index(_mm512_mul_ps(u, nu), last_u);
+        let iv = floor_index(_mm512_mul_ps(v, nv), last_v);
+        let at = _mm512_add_epi32(_mm512_mullo_epi32(iv, stride), iu);
+        // SAFETY: iu < nu and iv < nv (floor_index clamps), so `at + 1` is inside
+        // the nv (nu + 1) conditional entries and `iv + 1` inside the nv + 1
+        // marginal ones; every index fits an i32 (checked above).
+        let (c0, c1, m0, m1) = unsafe {
+            (
+                _mm512_i32gather_epi32::<4>(at, cdf.cast()),
+                _mm512_i32gather_epi32::<4>(_mm512_add_epi32(at, one), cdf.cast()),
+                _mm512_i32gather_epi32::<4>(iv, marginal.cast()),
+                _mm512_i32gather_epi32::<4>(_mm512_add_epi32(iv, one), marginal.cast()),
+            )
+        };
+        let (wu, wv) = (_mm512_sub_epi32(c1, c0), _mm512_sub_epi32(m1, m0));
+        // (wu wv) pdf_scale in f64, rounded to f32 once, eight lanes at a time.
+        let half = |w: __m512i, upper: bool| {
+            let h = if upper {
+                _mm512_extracti64x4_epi64::<1>(w)
+            } else {
+                _mm512_castsi512_si256(w)
+            };
+            _mm512_cvtepu32_pd(h)
+        };
+        let planar_half = |upper: bool| {
+            _mm512_cvtpd_ps(_mm512_mul_pd(
+                _mm512_mul_pd(half(wu, upper), half(wv, upper)),
+                scale,
+            ))
+        };
+        let planar = _mm512_insertf32x8::<1>(
+            _mm512_castps256_ps512(planar_half(false)),
+            planar_half(true),
+        );
+        // `solid_angle`: 0 where the Jacobian or the pdf is not finite.
+        let inv_jacobian = _mm512_mul_ps(csc, _mm512_set1_ps(1.0 / EQUIRECT_JACOBIAN));
+        let pdf = _mm512_mul_ps(planar, inv_jacobian);
+        let finite = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(inv_jacobian, infinity)
+            & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(pdf, infinity);
+        let pdf = _mm512_maskz_mov_ps(finite, pdf);
+        // SAFETY: the mask covers the chunk's `out.len()` entries only.
+        unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr(), lane_mask(out.len()), pdf) };
+    }
+    true
+}
+
+/// [`EnvironmentLight::radiance_batch`] on one chunk, for the bilinear lookup of
+/// a lat-long map (periodic in u); `false` (and nothing written) for any other
+/// lookup or mapping.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+pub(super) fn radiance_chunk(
+    light: &EnvironmentLight,
+    dirs: &[Vec3],
+    out: &mut [[f32; 3]],
+) -> bool {
+    let image = &light.image;
+    let (w, h) = (image.width(), image.height());
+    if light.options.mapping != Mapping::Equirectangular
+        || light.options.lookup != Lookup::Bilinear
+        || w.saturating_mul(h).saturating_mul(3) > i32::MAX as usize
+    {
+        return false;
+    }
+    let frame = Frame::of(light);
+    let (w32, h32) = (w as i32, h as i32);
+    let (wf, hf) = (_mm512_set1_ps(len_f32(w)), _mm512_set1_ps(len_f32(h)));
+    let (wi, hi) = (_mm512_set1_epi32(w32), _mm512_set1_epi32(h32));
+    let (zero_i, one_i) = (_mm512_setzero_si512(), _mm512_set1_epi32(1));
+    let (zero, one, half) = (
+        _mm512_setzero_ps(),
+        _mm512_set1_ps(1.0),
+        _mm512_set1_ps(0.5),
+    );
+    let last_column = _mm512_set1_epi32(2 * w32 - 1);
+    let scale = _mm512_set1_ps(light.options.scale);
+    let texels = image.texels().as_ptr().cast::<f32>();
+    for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+        let [x, y, z] = load_directions(dirs);
+        let (u, v, _) = frame.to_uv(x, y, z);
+        // Columns, as `EnvImage::lookup_block` (periodic u): s = u w - ½ + w.
+        let s = _mm512_add_ps(_mm512_sub_ps(_mm512_mul_ps(periodic(u), wf), half), wf);
+        let k = floor_index(s, last_column);
+        let wrapped = _mm512_cmpge_epi32_mask(k, wi);
+        let x0 = _mm512_mask_sub_epi32(k, wrapped, k, wi);
+        let x1 = _mm512_add_epi32(x0, one_i);
+        let x1 = _mm512_mask_mov_epi32(x1, _mm512_cmpeq_epi32_mask(x1, wi), zero_i);
+        let fs = _mm512_sub_ps(s, _mm512_cvtepi32_ps(k));
+        // Rows, clamped: t = v h + ½.
+        let t = _mm512_add_ps(_mm512_mul_ps(v, hf), half);
+        let i = floor_index(t, hi);
+        let y0 = _mm512_max_epi32(_mm512_sub_epi32(i, one_i), zero_i);
+        let y1 = _mm512_min_epi32(i, _mm512_sub_epi32(hi, one_i));
+        let ft = _mm512_sub_ps(t, _mm512_cvtepi32_ps(i));
+        // `blend`'s weights (a NaN weight becomes 0).
+        let (fs, ft) = (_mm512_max_ps(fs, zero), _mm512_max_ps(ft, zero));
+        let (gs, gt) = (_mm512_sub_ps(one, fs), _mm512_sub_ps(one, ft));
+        let weights = [
+            _mm512_mul_ps(gs, gt),
+            _mm512_mul_ps(fs, gt),
+            _mm512_mul_ps(gs, ft),
+            _mm512_mul_ps(fs, ft),
+        ];
+        let texel = |x: __m512i, y: __m512i| {
+            let at = _mm512_add_epi32(_mm512_mullo_epi32(y, wi), x);
+            _mm512_add_epi32(_mm512_add_epi32(at, at), at)
+        };
+        let corners = [texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1)];
+        let mut rgb = [zero; 3];
+        for (c, rgb) in rgb.iter_mut().enumerate() {
+            let channel = _mm512_set1_epi32(c as i32);
+            // SAFETY: x0, x1 < w and y0, y1 < h, so every corner's channel is
+            // inside the w h texels, and 3 w h fits an i32 (checked above).
+            let [a, b, c, d] = corners.map(|at| unsafe {
+                _mm512_i32gather_ps::<4>(_mm512_add_epi32(at, channel), texels.cast())
+            });
+            let near = _mm512_add_ps(_mm512_mul_ps(weights[0], a), _mm512_mul_ps(weights[1], b));
+            let far = _mm512_add_ps(_mm512_mul_ps(weights[2], c), _mm512_mul_ps(weights[3], d));
+            *rgb = _mm512_mul_ps(_mm512_add_ps(near, far), scale);
+        }
+        store_triples(out, rgb);
+    }
+    true
+}
+
+/// The rotation into the light's frame, if any, and the lat-long map's angles.
+struct Frame {
+    rows: Option<[[__m512; 3]; 3]>,
+}
+
+impl Frame {
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+    fn of(light: &EnvironmentLight) -> Self {
+        let rows = light.rotated.then(|| {
+            light
+                .world_to_light
+                .rows()
+                .map(|row| row.map(|m| _mm512_set1_ps(m)))
+        });
+        Self { rows }
+    }
+
+    /// `direction_to_equirect_and_csc` of 16 world directions (rotated into the
+    /// light's frame first, as `Rotation::apply` does): `u`, `v` and `1 / sin θ`.
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+    #[inline]
+    fn to_uv(&self, x: __m512, y: __m512, z: __m512) -> (__m512, __m512, __m512) {
+        let (x, y, z) = match &self.rows {
+            None => (x, y, z),
+            Some(m) => {
+                let row = |r: &[__m512; 3]| {
+                    _mm512_add_ps(
+                        _mm512_add_ps(_mm512_mul_ps(r[0], x), _mm512_mul_ps(r[1], y)),
+                        _mm512_mul_ps(r[2], z),
+                    )
+                };
+                (row(&m[0]), row(&m[1]), row(&m[2]))
+            }
+        };
+        let r2 = _mm512_add_ps(_mm512_mul_ps(x, x), _mm512_mul_ps(y, y));
+        let r = _mm512_sqrt_ps(r2);
+        let csc = _mm512_div_ps(_mm512_sqrt_ps(_mm512_add_ps(r2, _mm512_mul_ps(z, z))), r);
+        let v = atan2_pi(r, z);
+        // `u_of_half_turns`: φ/π in [-1, 1] to u in [0, 1).
+        let turns = atan2_pi(y, x);
+        let u = _mm512_mul_ps(_mm512_set1_ps(0.5), turns);
+        let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(turns, _mm512_setzero_ps());
+        let u = _mm512_mask_add_ps(u, negative, u, _mm512_set1_ps(1.0));
+        // minps gives its second operand for a NaN, as f32::min does.
+        let u = _mm512_min_ps(u, _mm512_set1_ps(ONE_MINUS_EPSILON));
+        (u, v, csc)
+    }
+}
+
+/// `math::atan2_pi` on 16 lanes: its operations, in its order.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn atan2_pi(y: __m512, x: __m512) -> __m512 {
+    let zero = _mm512_setzero_ps();
+    let (ax, ay) = (_mm512_abs_ps(x), _mm512_abs_ps(y));
+    let swapped = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ay, ax);
+    let num = _mm512_mask_blend_ps(swapped, ay, ax);
+    let den = _mm512_mask_blend_ps(swapped, ax, ay);
+    let big = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(num, _mm512_mul_ps(_mm512_set1_ps(TAN_PI_8), den));
+    let top = _mm512_mask_sub_ps(num, big, num, den);
+    let bottom = _mm512_mask_add_ps(den, big, num, den);
+    // maxps gives its second operand for a NaN: the scalar `if MIN_POSITIVE > bottom`.
+    let bottom = _mm512_max_ps(_mm512_set1_ps(f32::MIN_POSITIVE), bottom);
+    let t = _mm512_div_ps(top, bottom);
+    let s = _mm512_mul_ps(t, t);
+    let s2 = _mm512_mul_ps(s, s);
+    let q = &ATAN_PI_Q;
+    let pair = |k: usize| {
+        _mm512_add_ps(
+            _mm512_set1_ps(q[k]),
+            _mm512_mul_ps(_mm512_set1_ps(q[k + 1]), s),
+        )
+    };
+    let poly = _mm512_add_ps(
+        pair(0),
+        _mm512_mul_ps(s2, _mm512_add_ps(pair(2), _mm512_mul_ps(s2, pair(4)))),
+    );
+    let offset = _mm512_maskz_mov_ps(big, _mm512_set1_ps(0.25));
+    let a = _mm512_add_ps(offset, _mm512_mul_ps(t, poly));
+    let a = _mm512_mask_sub_ps(a, swapped, _mm512_set1_ps(0.5), a);
+    let a = _mm512_mask_sub_ps(
+        a,
+        _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, zero),
+        _mm512_set1_ps(1.0),
+        a,
+    );
+    let flip = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(y, zero);
+    _mm512_mask_xor_ps(a, flip, a, _mm512_set1_ps(-0.0))
+}
+
+/// `math::floor_index_i32` on 16 lanes: ⌊x⌋ clamped to `[0, last]`, NaN to 0.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn floor_index(x: __m512, last: __m512i) -> __m512i {
+    // maxps(x, 0) gives 0 for a NaN x, as f32::max does.
+    let y = _mm512_max_ps(x, _mm512_setzero_ps());
+    let y = _mm512_min_ps(y, _mm512_set1_ps(2_147_483_520.0));
+    _mm512_min_epi32(_mm512_cvttps_epi32(y), last)
+}
+
+/// `image::periodic_lanes` on 16 lanes: u reduced into `[0, 1)` (NaN to 0).
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn periodic(u: __m512) -> __m512 {
+    let (zero, one) = (_mm512_setzero_ps(), _mm512_set1_ps(1.0));
+    let r = _mm512_sub_ps(u, floor(u));
+    let r = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_LT_OQ>(r, one), r);
+    let inside =
+        _mm512_cmp_ps_mask::<_CMP_GE_OQ>(u, zero) & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(u, one);
+    _mm512_mask_blend_ps(inside, r, u)
+}
+
+/// `math::floor_f32` on 16 lanes.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn floor(x: __m512) -> __m512 {
+    const BIG: f32 = 8_388_608.0;
+    // maxps(x, -BIG) gives -BIG for a NaN x, as f32::max does.
+    let c = _mm512_min_ps(_mm512_max_ps(x, _mm512_set1_ps(-BIG)), _mm512_set1_ps(BIG));
+    let t = _mm512_cvtepi32_ps(_mm512_cvttps_epi32(c));
+    let above = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(t, c);
+    let floor = _mm512_mask_sub_ps(t, above, t, _mm512_set1_ps(1.0));
+    let small = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_abs_ps(c), _mm512_set1_ps(BIG));
+    _mm512_mask_blend_ps(small, x, floor)
+}
+
+/// The first `n` of 16 lanes (all for `n >= 16`).
+#[inline]
+fn lane_mask(n: usize) -> __mmask16 {
+    if n >= LANES {
+        !0
+    } else {
+        (1u16 << n) - 1
+    }
+}
+
+/// For each of the three vectors of 16 interleaved triples, which of its 16
+/// floats come from coordinate `k` (`first` picks from the first two vectors,
+/// `second` keeps those and picks the rest from the third).
+const fn deinterleave(k: usize) -> ([i32; 16], [i32; 16]) {
+    let (mut first, mut second) = ([0; 16], [0; 16]);
+    let mut i = 0;
+    while i < 16 {
+        let p = 3 * i + k;
+        if p < 32 {
+            first[i] = p as i32;
+            second[i] = i as i32;
+        } else {
+            second[i] = (16 + p - 32) as i32;
+        }
+        i += 1;
+    }
+    (first, second)
+}
+
+/// For output vector `m` of 16 interleaved triples, which lane of the first two
+/// coordinates (`first`) and then of the third (`second`) each float is.
+const fn interleave(m: usize) -> ([i32; 16], [i32; 16]) {
+    let (mut first, mut second) = ([0; 16], [0; 16]);
+    let mut q = 0;
+    while q < 16 {
+        let p = 16 * m + q;
+        let (i, channel) = (p / 3, p % 3);
+        first[q] = match channel {
+            0 => i as i32,
+            1 => 16 + i as i32,
+            _ => 0,
+        };
+        second[q] = if channel == 2 {
+            16 + i as i32
+        } else {
+            q as i32
+        };
+        q += 1;
+    }
+    (first, second)
+}
+
+const DEINTERLEAVE: [([i32; 16], [i32; 16]); 3] =
+    [deinterleave(0), deinterleave(1), deinterleave(2)];
+const INTERLEAVE: [([i32; 16], [i32; 16]); 3] = [interleave(0), interleave(1), interleave(2)];
+
+/// Loads an index vector.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn indices(i: &[i32; 16]) -> __m512i {
+    // SAFETY: 16 i32 are 64 readable bytes.
+    unsafe { _mm512_loadu_si512(i.as_ptr().cast()) }
+}
+
+/// The x, y and z of up to 16 directions in lanes (missing ones are zero).
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn load_directions(dirs: &[Vec3]) -> [__m512; 3] {
+    let floats = 3 * dirs.len().min(LANES);
+    let base = dirs.as_ptr().cast::<f32>();
+    let part = |m: usize| {
+        let mask = lane_mask(floats.saturating_sub(16 * m));
+        // SAFETY: the mask covers only the 3 len floats of `dirs` (`Vec3` is
+        // `repr(C)` over three f32); masked-off lanes are not read.
+        unsafe { _mm512_maskz_loadu_ps(mask, base.wrapping_add(16 * m)) }
+    };
+    let (a, b, c) = (part(0), part(1), part(2));
+    DEINTERLEAVE.map(|(first, second)| {
+        _mm512_permutex2var_ps(
+            _mm512_permutex2var_ps(a, indices(&first), b),
+            indices(&second),
+            c,
+        )
+    })
+}
+
+/// Stores up to 16 triples from their coordinates in lanes.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn store_triples(out: &mut [[f32; 3]], [r, g, b]: [__m512; 3]) {
+    let floats = 3 * out.len().min(LANES);
+    let base = out.as_mut_ptr().cast::<f32>();
+    for (m, (first, second)) in INTERLEAVE.iter().enumerate() {
+        let v = _mm512_permutex2var_ps(
+            _mm512_permutex2var_ps(r, indices(first), g),
+            indices(second),
+            b,
+        );
+        let mask = lane_mask(floats.saturating_sub(16 * m));
+        // SAFETY: the mask covers only the 3 len floats of `out`.
+        unsafe { _mm512_mask_storeu_ps(base.wrapping_add(16 * m), mask, v) };
+    }
+}
