@@ -5,6 +5,7 @@
 //!
 //! `RAYON_NUM_THREADS=1 cargo run --release --example angle_floor`
 
+use envlight::light::Density;
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Vec3};
 use std::time::Instant;
 
@@ -14,9 +15,14 @@ fn main() {
     let dirs: Vec<Vec3> = (0..n)
         .map(|_| envlight::math::uniform_sphere([rng.next_f32(), rng.next_f32()]))
         .collect();
-    for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+    for (density, lookup) in [
+        (Density::PiecewiseConstant, Lookup::Nearest),
+        (Density::PiecewiseConstant, Lookup::Bilinear),
+        (Density::PiecewiseBilinear, Lookup::Bilinear),
+    ] {
         let image = EnvImage::from_fn(1, 1, |_, _| [1.0; 3]).expect("a map");
         let options = LightOptions {
+            density,
             lookup,
             ..Default::default()
         };
@@ -34,6 +40,9 @@ fn main() {
         let mut radiance = vec![[0.0f32; 3]; n];
         let pdf = best(&mut || light.pdf_batch(&dirs, &mut pdfs));
         let rad = best(&mut || light.radiance_batch(&dirs, &mut radiance));
-        println!("1x1 map, {lookup:?} lookup: pdf_batch {pdf:.2} ns, radiance_batch {rad:.2} ns");
+        println!(
+            "1x1 map, {} density, {lookup:?} lookup: pdf_batch {pdf:.2} ns, radiance_batch {rad:.2} ns",
+            density.name()
+        );
     }
 }

@@ -81,6 +81,18 @@ pub struct BilinearDistribution2D {
     integral: f64,
 }
 
+/// A [`BilinearDistribution2D`] on the texel-centre layout as tables (see
+/// [`BilinearDistribution2D::centred_tables`]): the node values (`mu` per row),
+/// the node positions, the cell counts `[w, h]` that locate a patch
+/// (`⌊x n + ½⌋`) and the patches' distribution.
+pub(crate) struct CentredTables<'a> {
+    pub values: &'a [f32],
+    pub u_nodes: &'a [f64],
+    pub v_nodes: &'a [f64],
+    pub cells: [f64; 2],
+    pub patches: crate::distribution::CellTables<'a>,
+}
+
 impl BilinearDistribution2D {
     /// Builds the density of `values`, given row-major with `v_nodes.len()` rows of
     /// `u_nodes.len()` values, the value of row `k`, column `i` sitting at
@@ -183,6 +195,18 @@ impl BilinearDistribution2D {
     pub(crate) fn texel_centre_cells(&self) -> Option<[usize; 2]> {
         let (w, h) = (self.u.cells, self.v.cells);
         (w > 0.0 && h > 0.0).then_some([w as usize, h as usize])
+    }
+
+    /// The tables of the texel-centre layout for kernels that gather them
+    /// themselves (the AVX-512 batch queries); `None` for other node layouts.
+    pub(crate) fn centred_tables(&self) -> Option<CentredTables<'_>> {
+        self.texel_centre_cells().map(|_| CentredTables {
+            values: &self.values,
+            u_nodes: &self.u.nodes,
+            v_nodes: &self.v.nodes,
+            cells: [self.u.cells, self.v.cells],
+            patches: self.patches.cell_tables(),
+        })
     }
 
     /// Bytes of sampling data held (values, the patch distribution and the node

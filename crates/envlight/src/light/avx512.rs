@@ -13,8 +13,9 @@
 //! (another sampler, density, mapping or lookup, or tables too large for 32-bit
 //! gather indices); the caller then runs the generic kernel.
 
-use super::{EnvironmentLight, Mapping, Planar};
-use crate::distribution::ONE_MINUS_EPSILON;
+use super::{EnvironmentLight, LightSample, Mapping, Planar};
+use crate::bilinear::BilinearDistribution2D;
+use crate::distribution::{CDF_ONE, ONE_MINUS_EPSILON};
 use crate::image::Lookup;
 use crate::mapping::EQUIRECT_JACOBIAN;
 use crate::math::{len_f32, Vec3, ATAN_PI_Q, TAN_PI_8};
@@ -28,8 +29,10 @@ const LANES: usize = 16;
 /// for any other light.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
 pub(super) fn pdf_chunk(light: &EnvironmentLight, dirs: &[Vec3], out: &mut [f32]) -> bool {
-    let Planar::Inversion(d) = &light.planar else {
-        return false;
+    let d = match &light.planar {
+        Planar::Inversion(d) => d,
+        Planar::Bilinear(d) => return bilinear_pdfs(light, d, dirs, out),
+        _ => return false,
     };
     let t = d.cell_tables();
     if light.options.mapping != Mapping::Equirectangular
@@ -83,16 +86,202 @@ pub(super) fn pdf_chunk(light: &EnvironmentLight, dirs: &[Vec3], out: &mut [f32]
             _mm512_castps256_ps512(planar_half(false)),
             planar_half(true),
         );
-        // `solid_angle`: 0 where the Jacobian or the pdf is not finite.
-        let inv_jacobian = _mm512_mul_ps(csc, _mm512_set1_ps(1.0 / EQUIRECT_JACOBIAN));
-        let pdf = _mm512_mul_ps(planar, inv_jacobian);
-        let finite = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(inv_jacobian, infinity)
-            & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(pdf, infinity);
-        let pdf = _mm512_maskz_mov_ps(finite, pdf);
-        // SAFETY: the mask covers the chunk's `out.len()` entries only.
-        unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr(), lane_mask(out.len()), pdf) };
+        store_solid_angle(out, planar, csc, infinity);
     }
     true
+}
+
+/// [`EnvironmentLight::sample_batch`] on one chunk for the bilinear density on
+/// the lat-long map: the generic sampling, with the pdfs at the returned
+/// directions from [`bilinear_pdfs`]; `false` for any other light.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+pub(super) fn sample_chunk(
+    light: &EnvironmentLight,
+    xi: &[[f32; 2]],
+    out: &mut [Option<LightSample>],
+) -> bool {
+    let Planar::Bilinear(d) = &light.planar else {
+        return false;
+    };
+    if !bilinear_applies(light, d) {
+        return false;
+    }
+    light.sample_bilinear_blocks(d, xi, out, |dirs: &[Vec3], out: &mut [f32]| {
+        bilinear_pdfs(light, d, dirs, out);
+    });
+    true
+}
+
+/// Whether [`bilinear_pdfs`] runs for `d`: the lat-long map, the texel-centre
+/// layout, tables small enough for 32-bit gather indices.
+fn bilinear_applies(light: &EnvironmentLight, d: &BilinearDistribution2D) -> bool {
+    light.options.mapping == Mapping::Equirectangular
+        && d.centred_tables().is_some_and(|t| {
+            t.values.len() <= i32::MAX as usize
+                && t.patches.conditional_cdf.len() <= i32::MAX as usize
+        })
+}
+
+/// The bilinear density's pdf at each direction (`pdf_in_centred_patches` over
+/// the Jacobian, in f64 as there, eight lanes at a time); `false` (and nothing
+/// written) where [`bilinear_applies`] does not hold.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+fn bilinear_pdfs(
+    light: &EnvironmentLight,
+    d: &BilinearDistribution2D,
+    dirs: &[Vec3],
+    out: &mut [f32],
+) -> bool {
+    if !bilinear_applies(light, d) {
+        return false;
+    }
+    let Some(t) = d.centred_tables() else {
+        return false;
+    };
+    let frame = Frame::of(light);
+    let (mu, mv) = (t.u_nodes.len(), t.v_nodes.len());
+    let row = _mm256_set1_epi32(mu as i32);
+    let one = _mm256_set1_epi32(1);
+    // Patches are within [0, mu - 2] × [0, mv - 2] by construction; the clamps
+    // keep the gathers inside the tables whatever happens.
+    let (last_i, last_k) = (
+        _mm256_set1_epi32(mu as i32 - 2),
+        _mm256_set1_epi32(mv as i32 - 2),
+    );
+    let stride = _mm256_set1_epi32(t.patches.nu as i32 + 1);
+    let (cells_u, cells_v) = (_mm512_set1_pd(t.cells[0]), _mm512_set1_pd(t.cells[1]));
+    let (zero, one_f, half, four) = (
+        _mm512_setzero_pd(),
+        _mm512_set1_pd(1.0),
+        _mm512_set1_pd(0.5),
+        _mm512_set1_pd(4.0),
+    );
+    let cdf_unit = _mm512_set1_pd(1.0 / CDF_ONE as f64);
+    let inv_cells = t.cells.map(|n| {
+        let n = n as u64;
+        n.is_power_of_two().then(|| _mm512_set1_pd(1.0 / n as f64))
+    });
+    let infinity = _mm512_set1_ps(f32::INFINITY);
+    let (values, un, vn) = (t.values.as_ptr(), t.u_nodes.as_ptr(), t.v_nodes.as_ptr());
+    let (cdf, marginal) = (
+        t.patches.conditional_cdf.as_ptr(),
+        t.patches.marginal_cdf.as_ptr(),
+    );
+    // `unit_closed`: x in [0, 1] as f64 (0 for NaN). minpd gives 1 for a NaN.
+    let unit_closed = |x: __m256| {
+        let y = _mm512_min_pd(_mm512_cvtps_pd(x), one_f);
+        _mm512_maskz_mov_pd(_mm256_cmp_ps_mask::<_CMP_GT_OQ>(x, _mm256_setzero_ps()), y)
+    };
+    // `pdf_in_centred_patches` at eight points (`u`, `v` in f32).
+    let planar_pdfs = |u: __m256, v: __m256| {
+        let (u, v) = (unit_closed(u), unit_closed(v));
+        let i = _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(u, cells_u), half));
+        let k = _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(v, cells_v), half));
+        let (i, k) = (_mm256_min_epu32(i, last_i), _mm256_min_epu32(k, last_k));
+        let top = _mm256_add_epi32(_mm256_mullo_epi32(k, row), i);
+        let bottom = _mm256_add_epi32(top, row);
+        let at = _mm256_add_epi32(_mm256_mullo_epi32(k, stride), i);
+        // SAFETY: i <= mu - 2 and k <= mv - 2, so the corners are inside the
+        // mu mv values, the sides inside the nodes, and the patch's CDF entries
+        // inside the patch distribution's tables (whose grid is (mu - 1) ×
+        // (mv - 1)); every index fits an i32 (`bilinear_applies`).
+        // Each pair of neighbours (a row's two corners, a cell's two CDF
+        // entries) is one 64-bit gather, split into its low and high halves.
+        // SAFETY: i <= mu - 2 and k <= mv - 2, so both corners of each row are
+        // inside the mu mv values, the sides inside the nodes, and the patch's
+        // CDF entries inside the patch distribution's tables (whose grid is
+        // (mu - 1) × (mv - 1)); every index fits an i32 (`bilinear_applies`).
+        let pair = |p: *const u32, at: __m256i| unsafe {
+            let both = _mm512_i32gather_epi64::<4>(at, p.cast());
+            [
+                _mm512_cvtepi64_epi32(both),
+                _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(both)),
+            ]
+        };
+        let values_pair =
+            |at: __m256i| pair(values.cast(), at).map(|v| _mm512_cvtps_pd(_mm256_castsi256_ps(v)));
+        let [a, b] = values_pair(top);
+        let [c, d] = values_pair(bottom);
+        // A node `(m - ½) / n` (clamped to [0, 1] at the ends), computed where n
+        // is a power of two (then a product, exactly the stored quotient), else
+        // read.
+        let node = |p: *const f64, inv_n: Option<__m512d>, m: __m256i| match inv_n {
+            Some(inv_n) => {
+                let x = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi32_pd(m), half), inv_n);
+                _mm512_min_pd(_mm512_max_pd(x, zero), one_f)
+            }
+            // SAFETY: as above.
+            None => unsafe { _mm512_i32gather_pd::<8>(m, p.cast()) },
+        };
+        let sides = [
+            node(un, inv_cells[0], i),
+            node(un, inv_cells[0], _mm256_add_epi32(i, one)),
+            node(vn, inv_cells[1], k),
+            node(vn, inv_cells[1], _mm256_add_epi32(k, one)),
+        ];
+        let widths =
+            [pair(cdf, at), pair(marginal, k)].map(|[low, high]| _mm256_sub_epi32(high, low));
+        // `probability_of_widths`.
+        let probability = _mm512_mul_pd(
+            _mm512_mul_pd(_mm512_cvtepu32_pd(widths[0]), cdf_unit),
+            _mm512_mul_pd(_mm512_cvtepu32_pd(widths[1]), cdf_unit),
+        );
+        // `pdf_from_corners`.
+        let [u0, u1, v0, v1] = sides;
+        let left = _mm512_max_pd(_mm512_sub_pd(u, u0), zero);
+        let right = _mm512_max_pd(_mm512_sub_pd(u1, u), zero);
+        let above = _mm512_max_pd(_mm512_sub_pd(v, v0), zero);
+        let below = _mm512_max_pd(_mm512_sub_pd(v1, v), zero);
+        let weighted = _mm512_add_pd(
+            _mm512_mul_pd(
+                below,
+                _mm512_add_pd(_mm512_mul_pd(right, a), _mm512_mul_pd(left, b)),
+            ),
+            _mm512_mul_pd(
+                above,
+                _mm512_add_pd(_mm512_mul_pd(right, c), _mm512_mul_pd(left, d)),
+            ),
+        );
+        let area = _mm512_mul_pd(_mm512_sub_pd(u1, u0), _mm512_sub_pd(v1, v0));
+        let sum = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(a, b), c), d);
+        let denominator = _mm512_mul_pd(_mm512_mul_pd(area, area), sum);
+        let pdf = _mm512_div_pd(
+            _mm512_mul_pd(_mm512_mul_pd(four, probability), weighted),
+            denominator,
+        );
+        let positive = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(denominator, zero);
+        _mm256_maskz_mov_ps(positive, _mm512_cvtpd_ps(pdf))
+    };
+    for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+        let [x, y, z] = load_directions(dirs);
+        let (u, v, csc) = frame.to_uv(x, y, z);
+        let lower = planar_pdfs(_mm512_castps512_ps256(u), _mm512_castps512_ps256(v));
+        let upper = planar_pdfs(upper_half(u), upper_half(v));
+        let planar = _mm512_insertf32x8::<1>(_mm512_castps256_ps512(lower), upper);
+        store_solid_angle(out, planar, csc, infinity);
+    }
+    true
+}
+
+/// Lanes 8 to 15.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn upper_half(x: __m512) -> __m256 {
+    _mm512_extractf32x8_ps::<1>(x)
+}
+
+/// `solid_angle` of the planar pdfs over the Jacobians `csc / EQUIRECT_JACOBIAN`
+/// (0 where either is not finite), stored to the first `out.len()` lanes.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn store_solid_angle(out: &mut [f32], planar: __m512, csc: __m512, infinity: __m512) {
+    let inv_jacobian = _mm512_mul_ps(csc, _mm512_set1_ps(1.0 / EQUIRECT_JACOBIAN));
+    let pdf = _mm512_mul_ps(planar, inv_jacobian);
+    let finite = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(inv_jacobian, infinity)
+        & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(pdf, infinity);
+    let pdf = _mm512_maskz_mov_ps(finite, pdf);
+    // SAFETY: the mask covers the chunk's `out.len()` entries only.
+    unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr(), lane_mask(out.len()), pdf) };
 }
 
 /// [`EnvironmentLight::radiance_batch`] on one chunk, for the bilinear lookup of

@@ -40,14 +40,14 @@ impl EnvironmentLight {
             Planar::Inversion(d) => self.sample_blocks(
                 xi,
                 out,
-                None,
+                NO_PDFS,
                 #[inline(always)]
                 |xi, out| inversion_block(d, xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
             ),
             Planar::Alias(d) => self.sample_blocks(
                 xi,
                 out,
-                None,
+                NO_PDFS,
                 #[inline(always)]
                 |xi, out| {
                     one_by_one(
@@ -60,18 +60,37 @@ impl EnvironmentLight {
             Planar::Hierarchical(d) => self.sample_blocks(
                 xi,
                 out,
-                None,
+                NO_PDFS,
                 #[inline(always)]
                 |xi, out| one_by_one(&|x| d.sample_continuous(x), xi, out),
             ),
-            Planar::Bilinear(d) => self.sample_blocks(
+            Planar::Bilinear(d) => self.sample_bilinear_blocks(
+                d,
                 xi,
                 out,
-                Some(d),
                 #[inline(always)]
-                |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+                |dirs: &[Vec3], out: &mut [f32]| self.bilinear_pdfs::<false>(d, dirs, out),
             ),
         }
+    }
+
+    /// [`Self::sample_blocks`] for the bilinear density `d`, with `pdfs` giving
+    /// [`Self::pdf`] at the returned directions (bit for bit).
+    #[inline(always)]
+    pub(super) fn sample_bilinear_blocks(
+        &self,
+        d: &BilinearDistribution2D,
+        xi: &[[f32; 2]],
+        out: &mut [Option<LightSample>],
+        pdfs: impl Fn(&[Vec3], &mut [f32]),
+    ) {
+        self.sample_blocks(
+            xi,
+            out,
+            Some(pdfs),
+            #[inline(always)]
+            |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+        )
     }
 
     /// [`Self::sample_batch`] in two stages per block of samples: all the planar
@@ -87,15 +106,15 @@ impl EnvironmentLight {
         &self,
         xi: &[[f32; 2]],
         out: &mut [Option<LightSample>],
-        continuous: Option<&BilinearDistribution2D>,
+        continuous: Option<impl Fn(&[Vec3], &mut [f32])>,
         planar_block: impl Fn(&[[f32; 2]], &mut [Sample2D]) + Sync,
     ) {
         let mut planar = [Sample2D::default(); STAGED_BLOCK];
         for (xi, out) in xi.chunks(STAGED_BLOCK).zip(out.chunks_mut(STAGED_BLOCK)) {
             let planar = &mut planar[..xi.len()];
             planar_block(xi, planar);
-            if let Some(d) = continuous {
-                self.finish_continuous_block(d, planar, out);
+            if let Some(pdfs) = &continuous {
+                self.finish_continuous_block(pdfs, planar, out);
             } else {
                 self.finish_constant_block(planar, out);
             }
@@ -204,7 +223,7 @@ impl EnvironmentLight {
     #[inline(always)]
     fn finish_continuous_block(
         &self,
-        d: &BilinearDistribution2D,
+        pdfs_at: &impl Fn(&[Vec3], &mut [f32]),
         planar: &[Sample2D],
         out: &mut [Option<LightSample>],
     ) {
@@ -230,7 +249,7 @@ impl EnvironmentLight {
             }
         }
         let mut pdfs = [0.0f32; STAGED_BLOCK];
-        self.bilinear_pdfs::<false>(d, &directions[..n], &mut pdfs[..n]);
+        pdfs_at(&directions[..n], &mut pdfs[..n]);
         for (k, (o, p)) in out.iter_mut().zip(planar).enumerate() {
             let pdf = pdfs[k];
             *o = (p.pdf != 0.0 && jacobians[k] > 0.0 && is_positive_finite(pdf)).then(|| {
@@ -281,7 +300,7 @@ impl EnvironmentLight {
     }
 
     wide_kernels! {
-        sample_chunk_wide => sample_chunk([f32; 2], Option<LightSample>);
+        sample_chunk_wide => sample_chunk([f32; 2], Option<LightSample>) or super::avx512::sample_chunk;
         pdf_chunk_wide => pdf_chunk(Vec3, f32) or super::avx512::pdf_chunk;
         radiance_chunk_wide => radiance_chunk(Vec3, [f32; 3]) or super::avx512::radiance_chunk;
     }
@@ -641,6 +660,10 @@ fn lane_by_lane<const N: usize>(
     out
 }
 
+/// The `continuous` argument of [`EnvironmentLight::sample_blocks`] for a
+/// piecewise-constant density (none).
+const NO_PDFS: Option<fn(&[Vec3], &mut [f32])> = None;
+
 /// Directions per block in the batch queries' vectorized stage
 /// ([`EnvironmentLight::to_uv_block`]): enough for several vectors of the widest
 /// kind, few enough that the block's arrays stay in registers and L1.
@@ -792,7 +815,13 @@ mod tests {
     fn batch_kernels_at_every_width_equal_single_queries() {
         // A coarse sky, and one whose sun covers a few texels of long rows (the
         // sampling searches among many faint cells).
-        let images = [crate::builtin::sky(96, 48), crate::builtin::sky(720, 360)];
+        // The last has power-of-two sides (the AVX-512 bilinear pdf computes its
+        // nodes then).
+        let images = [
+            crate::builtin::sky(96, 48),
+            crate::builtin::sky(720, 360),
+            crate::builtin::sky(256, 128),
+        ];
         let mut dirs: Vec<Vec3> = (0..1_001u64)
             .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(5, k)))
             .collect();
