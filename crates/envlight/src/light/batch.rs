@@ -662,7 +662,10 @@ fn lane_by_lane<const N: usize>(
 
 /// The `continuous` argument of [`EnvironmentLight::sample_blocks`] for a
 /// piecewise-constant density (none).
-const NO_PDFS: Option<fn(&[Vec3], &mut [f32])> = None;
+const NO_PDFS: Option<PdfsAt> = None;
+
+/// A function writing [`EnvironmentLight::pdf`] at each of a block's directions.
+type PdfsAt = fn(&[Vec3], &mut [f32]);
 
 /// Directions per block in the batch queries' vectorized stage
 /// ([`EnvironmentLight::to_uv_block`]): enough for several vectors of the widest
