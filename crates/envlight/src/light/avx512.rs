@@ -18,11 +18,14 @@ use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{CDF_ONE, ONE_MINUS_EPSILON};
 use crate::image::Lookup;
 use crate::mapping::EQUIRECT_JACOBIAN;
-use crate::math::{len_f32, Vec3, ATAN_PI_Q, TAN_PI_8};
+use crate::math::{len_f32, prefetch_ptr, Vec3, ATAN_PI_Q, TAN_PI_8};
 use std::arch::x86_64::*;
 
 /// Directions per vector.
 const LANES: usize = 16;
+
+/// How many blocks of directions ahead the input is asked for.
+const INPUT_AHEAD: usize = 8;
 
 /// [`EnvironmentLight::pdf_batch`] on one chunk, for the inversion sampler's
 /// piecewise-constant density on the lat-long map; `false` (and nothing written)
@@ -565,6 +568,11 @@ fn load_directions(dirs: &[Vec3]) -> [__m512; 3] {
         unsafe { _mm512_maskz_loadu_ps(mask, base.wrapping_add(16 * m)) }
     };
     let (a, b, c) = (part(0), part(1), part(2));
+    if INPUT_AHEAD > 0 {
+        for line in 0..3 {
+            prefetch_ptr(base.wrapping_add(3 * LANES * INPUT_AHEAD + 16 * line));
+        }
+    }
     DEINTERLEAVE.map(|(first, second)| {
         _mm512_permutex2var_ps(
             _mm512_permutex2var_ps(a, indices(&first), b),
