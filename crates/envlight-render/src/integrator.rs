@@ -83,7 +83,8 @@ impl<'a> Integrator<'a> {
     /// An integrator for `scene` under `light`. `max_depth` is the largest number of
     /// surface interactions on a path (1 = direct lighting only; 0 renders only what
     /// camera rays see directly: the environment, black objects). Builds the
-    /// compensated distribution, the product sampler (over a copy of `light`,
+    /// compensated distribution (`mis-compensated`, and `mis-product` for metals),
+    /// the product sampler (over a copy of `light`,
     /// `O(w h)`), or the portal light over the scene's portals (a copy of `light`
     /// and `12 n²` bytes of tables per portal side seen, see [`envlight::portal`]), when
     /// `strategy` needs it: once per render. A scene's portals that are not valid
@@ -94,8 +95,9 @@ impl<'a> Integrator<'a> {
         strategy: Strategy,
         max_depth: u32,
     ) -> Self {
-        let compensated =
-            (strategy == Strategy::MisCompensated).then(|| CompensatedLight::new(light));
+        // `mis-product` samples metals from the compensated light too.
+        let compensated = matches!(strategy, Strategy::MisCompensated | Strategy::MisProduct)
+            .then(|| CompensatedLight::new(light));
         let product = strategy
             .uses_product()
             .then(|| ProductSampler::new(Arc::new(light.clone()), ProductOptions::default()));
@@ -142,8 +144,8 @@ impl<'a> Integrator<'a> {
 
     /// Density of the light-sampling technique at world direction `d` (0 for
     /// strategies without one); `point` is the current vertex's shading point for
-    /// the product strategies (`None` where `mis-product` uses the light's own
-    /// sampler instead).
+    /// the product strategies (`None` where `mis-product` samples the compensated
+    /// light instead, at metals).
     #[inline]
     fn light_technique_pdf(
         &self,
@@ -152,6 +154,10 @@ impl<'a> Integrator<'a> {
         portal: Option<&PortalPoint>,
     ) -> f32 {
         match (&self.compensated, self.strategy) {
+            (Some(c), Strategy::MisProduct) => match point {
+                Some(p) => p.pdf(d),
+                None => c.pdf(d),
+            },
             (Some(c), _) => c.pdf(d),
             (None, Strategy::Mis | Strategy::Light) => self.light.pdf(d),
             (None, Strategy::Portal | Strategy::MisPortal) => match portal {
@@ -191,9 +197,10 @@ impl<'a> Integrator<'a> {
                 .as_ref()
                 .and_then(|c| c.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
-            Strategy::Product | Strategy::MisProduct => match point {
-                Some(p) => p.sample(xi),
-                None => self.light.sample(xi),
+            Strategy::Product | Strategy::MisProduct => match (point, &self.compensated) {
+                (Some(p), _) => p.sample(xi),
+                (None, Some(c)) => c.sample(xi),
+                (None, None) => self.light.sample(xi),
             }
             .map(|s| (s.direction, s.pdf, s.radiance)),
             Strategy::Portal | Strategy::MisPortal => match portal {
@@ -251,10 +258,12 @@ impl<'a> Integrator<'a> {
             }
             // The product sampler's target at this vertex; the escaped BSDF ray below
             // is weighted with the pdf of this same shading point.
-            // `mis-product` leaves metals to the light's own sampler: their tables
-            // follow the lobe but not the cosine under it, and BSDF sampling
-            // already covers a narrow lobe (BENCHMARKS.md, "Rendering at equal
-            // time": with product samples there, `balls` lost at equal time).
+            // `mis-product` samples metals from the MIS-compensated light (with BSDF
+            // sampling, power heuristic), not from their product: BSDF sampling
+            // covers a narrow lobe already, the compensated light covers what it
+            // misses, at a light sample's cost. Product samples at metals won at
+            // equal samples but cost 30% more per sample and lost at equal time
+            // (BENCHMARKS.md, "Metals in mis-product").
             let light_here = self.strategy == Strategy::MisProduct && bsdf.is_conductor();
             if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
                 point.set_factor(&bsdf.product_factor(normal, -ray.direction));

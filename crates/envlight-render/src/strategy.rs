@@ -17,7 +17,7 @@ use std::str::FromStr;
 /// | `mis` | importance sampling, power heuristic | power heuristic |
 /// | `mis-compensated` | compensated distribution, power heuristic | power heuristic |
 /// | `product` | product sampling of `L ×` the BSDF's factor, weight 1 | weight 0 |
-/// | `mis-product` | product sampling, power heuristic | power heuristic |
+/// | `mis-product` | product sampling (diffuse: alone; plastic: power heuristic); metals: the compensated distribution, power heuristic | as the shadow ray |
 /// | `portal` | the portal light at the vertex, weight 1 | weight 0 |
 /// | `mis-portal` | the portal light at the vertex, balance heuristic | balance heuristic |
 ///
