@@ -14,8 +14,7 @@
 
 use envlight::light::{Density, Mapping};
 use envlight::{
-    builtin, EnvImage, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler,
-    Vec3,
+    builtin, EnvImage, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
 };
 use envlight_verify::{efficiency, maps, product_normals, AtShadingPoint, Integrand, Reference};
 use std::sync::Arc;
@@ -177,7 +176,11 @@ fn highlight_view(n: Vec3, sun: Vec3) -> Vec3 {
     let c = n.dot(sun);
     if c > 0.05 {
         // reflect(sun) = 2 (n·s) n - s.
-        let r = Vec3::new(2.0 * c * n.x - sun.x, 2.0 * c * n.y - sun.y, 2.0 * c * n.z - sun.z);
+        let r = Vec3::new(
+            2.0 * c * n.x - sun.x,
+            2.0 * c * n.y - sun.y,
+            2.0 * c * n.z - sun.z,
+        );
         return r.normalized().unwrap_or(n);
     }
     let side = if n.z.abs() < 0.9 {

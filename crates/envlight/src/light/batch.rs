@@ -3,7 +3,7 @@
 //! angles, cells and lookups are computed side by side in vector lanes, with
 //! kernels compiled for AVX2 where the CPU has it. Bit for bit the single queries.
 
-use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
+use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar, ROUND_TRIP_MARGIN};
 use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
@@ -138,11 +138,14 @@ impl EnvironmentLight {
             let (mode, wrap) = (self.options.lookup, self.options.mapping.wrap());
             let lookups = self.image.lookup_block(&u, &v, mode, wrap);
             let scale = self.options.scale;
+            // Which points are clear of their cells' edges, in lanes (four
+            // divisions each, which one at a time cost a fifth of a sample).
+            let clear = self.clear_of_edges_lanes(planar);
             for (j, (o, &p)) in out.iter_mut().zip(planar).enumerate() {
                 let direction = Vec3::new(x[j], y[j], z[j]);
                 *o = if p.pdf == 0.0 {
                     None
-                } else if self.clear_of_edges(&p) {
+                } else if clear[j] {
                     let pdf = solid_angle(p.pdf, inv_jacobian[j]);
                     is_positive_finite(pdf).then(|| {
                         let l = self.image.fetch(&lookups, j);
@@ -159,6 +162,30 @@ impl EnvironmentLight {
                 };
             }
         }
+    }
+
+    /// [`Self::clear_of_edges`] of up to [`QUERY_BLOCK`] samples, as loops the
+    /// compiler vectorizes (the same operations: bit for bit the same answers);
+    /// lanes past the samples are false.
+    #[inline(always)]
+    fn clear_of_edges_lanes(&self, planar: &[Sample2D]) -> [bool; QUERY_BLOCK] {
+        let [nu, nv] = self.table_size();
+        let (mut u, mut v) = ([0.0f32; QUERY_BLOCK], [0.0f32; QUERY_BLOCK]);
+        let (mut iu, mut iv) = ([0u32; QUERY_BLOCK], [0u32; QUERY_BLOCK]);
+        for (j, p) in planar.iter().enumerate() {
+            (u[j], v[j]) = (p.uv[0], p.uv[1]);
+            (iu[j], iv[j]) = (p.cell[0] as u32, p.cell[1] as u32);
+        }
+        let (nu, nv) = (nu as f32, nv as f32);
+        let mut clear = [false; QUERY_BLOCK];
+        for j in 0..QUERY_BLOCK {
+            let inside = |x: f32, cell: u32, n: f32| {
+                let (lo, hi) = (cell as f32 / n, (cell + 1) as f32 / n);
+                x - lo >= ROUND_TRIP_MARGIN && hi - x >= ROUND_TRIP_MARGIN
+            };
+            clear[j] = j < planar.len() && inside(u[j], iu[j], nu) && inside(v[j], iv[j], nv);
+        }
+        clear
     }
 
     /// [`Self::uv_to_direction`] of `N` image points and the Jacobians there (as
