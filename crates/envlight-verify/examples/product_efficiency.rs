@@ -55,6 +55,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .collect::<Result<_, _>>()?,
         None => Vec::new(),
     };
+    let options = Options {
+        patches,
+        normal_grid,
+        mapping,
+    };
     let only: Option<Vec<String>> = std::env::var("MAPS")
         .ok()
         .map(|m| m.split(',').map(String::from).collect());
@@ -65,7 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut maps: Vec<(String, EnvImage)> = vec![("builtin:sky".into(), builtin::sky(1024, 512))];
     maps.extend(maps::shared(&wanted));
     if !glossy.is_empty() {
-        return glossy_table(&maps, &glossy, patches, normal_grid, random, mapping);
+        return glossy_table(&maps, &glossy, &options, random);
     }
     println!(
         "| map | density | normal | own eff. (Y) | product eff. (Y·cos⁺) | light eff. (Y·cos⁺) | product / own | variance gain |"
@@ -74,24 +79,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut worst = f64::INFINITY;
     for (name, image) in &maps {
         for density in [Density::PiecewiseConstant, Density::PiecewiseBilinear] {
-            let light = Arc::new(EnvironmentLight::new(
-                image.clone(),
-                LightOptions {
-                    density,
-                    mapping,
-                    ..Default::default()
-                },
-            )?);
+            let (light, sampler) = light_and_sampler(image, density, &options)?;
             let own =
                 efficiency(light.as_ref(), &Integrand::luminance(), Reference::Checked).efficiency;
-            let sampler = ProductSampler::new(
-                light.clone(),
-                ProductOptions {
-                    patches,
-                    normal_grid,
-                    ..Default::default()
-                },
-            );
             let normals = product_normals(&light, random);
             for (label, n) in normals {
                 let at = AtShadingPoint::new(&sampler, Factor::cosine(n));
@@ -117,32 +107,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 fn glossy_table(
     maps: &[(String, EnvImage)],
     roughness: &[f32],
-    patches: Option<[usize; 2]>,
-    normal_grid: Option<usize>,
+    options: &Options,
     random: usize,
-    mapping: Mapping,
 ) -> Result<(), Box<dyn std::error::Error>> {
     println!("| map | density | normal | α | product eff. (Y·cos⁺·D) | light eff. | gain |");
     println!("|---|---|---|---|---|---|---|");
     let mut worst = vec![f64::INFINITY; roughness.len()];
     for (name, image) in maps {
         for density in [Density::PiecewiseConstant, Density::PiecewiseBilinear] {
-            let light = Arc::new(EnvironmentLight::new(
-                image.clone(),
-                LightOptions {
-                    density,
-                    mapping,
-                    ..Default::default()
-                },
-            )?);
-            let sampler = ProductSampler::new(
-                light.clone(),
-                ProductOptions {
-                    patches,
-                    normal_grid,
-                    ..Default::default()
-                },
-            );
+            let (light, sampler) = light_and_sampler(image, density, options)?;
             let sun = light.brightest().1;
             for (label, n) in product_normals(&light, random) {
                 let outgoing = highlight_view(n, sun);
@@ -192,4 +165,36 @@ fn highlight_view(n: Vec3, sun: Vec3) -> Vec3 {
     Vec3::new(n.x + t.x, n.y + t.y, n.z + t.z)
         .normalized()
         .unwrap_or(n)
+}
+
+/// The light and product options the tables are made with.
+struct Options {
+    patches: Option<[usize; 2]>,
+    normal_grid: Option<usize>,
+    mapping: Mapping,
+}
+
+/// The light of `image` with `density` and its product sampler, as `options` say.
+fn light_and_sampler(
+    image: &EnvImage,
+    density: Density,
+    options: &Options,
+) -> Result<(Arc<EnvironmentLight>, ProductSampler), Box<dyn std::error::Error>> {
+    let light = Arc::new(EnvironmentLight::new(
+        image.clone(),
+        LightOptions {
+            density,
+            mapping: options.mapping,
+            ..Default::default()
+        },
+    )?);
+    let sampler = ProductSampler::new(
+        light.clone(),
+        ProductOptions {
+            patches: options.patches,
+            normal_grid: options.normal_grid,
+            ..Default::default()
+        },
+    );
+    Ok((light, sampler))
 }
