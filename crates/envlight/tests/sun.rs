@@ -705,15 +705,7 @@ fn envmaps() -> Option<PathBuf> {
 #[test]
 fn real_maps_residual_plus_disc_reproduces_the_irradiance() {
     let Some(dir) = envmaps() else { return };
-    let names = [
-        "sunrise.exr",
-        "city.exr",
-        "studio.exr",
-        "courtyard.exr",
-        "night.exr",
-        "colorful_studio_2k.hdr",
-    ];
-    for name in names {
+    for name in envlight_verify::maps::SHARED {
         let path = dir.join(name);
         if !path.is_file() {
             println!("skipped: {} not found", path.display());

@@ -14,7 +14,7 @@
 //! gather indices); the caller then runs the generic kernel.
 
 use super::{EnvironmentLight, LightSample, Mapping, Planar};
-use crate::bilinear::BilinearDistribution2D;
+use crate::bilinear::{BilinearDistribution2D, CentredTables};
 use crate::distribution::{CDF_ONE, ONE_MINUS_EPSILON};
 use crate::image::Lookup;
 use crate::mapping::EQUIRECT_JACOBIAN;
@@ -106,7 +106,7 @@ pub(super) fn sample_chunk(
     let Planar::Bilinear(d) = &light.planar else {
         return false;
     };
-    if !bilinear_applies(light, d) {
+    if bilinear_tables(light, d).is_none() {
         return false;
     }
     light.sample_bilinear_blocks(d, xi, out, |dirs: &[Vec3], out: &mut [f32]| {
@@ -115,19 +115,22 @@ pub(super) fn sample_chunk(
     true
 }
 
-/// Whether [`bilinear_pdfs`] runs for `d`: the lat-long map, the texel-centre
-/// layout, tables small enough for 32-bit gather indices.
-fn bilinear_applies(light: &EnvironmentLight, d: &BilinearDistribution2D) -> bool {
-    light.options.mapping == Mapping::Equirectangular
-        && d.centred_tables().is_some_and(|t| {
-            t.values.len() <= i32::MAX as usize
-                && t.patches.conditional_cdf.len() <= i32::MAX as usize
-        })
+/// The tables [`bilinear_pdfs`] reads for `d`, where it runs: the lat-long map,
+/// the texel-centre layout, tables small enough for 32-bit gather indices.
+fn bilinear_tables<'a>(
+    light: &EnvironmentLight,
+    d: &'a BilinearDistribution2D,
+) -> Option<CentredTables<'a>> {
+    d.centred_tables().filter(|t| {
+        light.options.mapping == Mapping::Equirectangular
+            && t.values.len() <= i32::MAX as usize
+            && t.patches.conditional_cdf.len() <= i32::MAX as usize
+    })
 }
 
 /// The bilinear density's pdf at each direction (`pdf_in_centred_patches` over
 /// the Jacobian, in f64 as there, eight lanes at a time); `false` (and nothing
-/// written) where [`bilinear_applies`] does not hold.
+/// written) where [`bilinear_tables`] does not hold.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
 fn bilinear_pdfs(
     light: &EnvironmentLight,
@@ -135,10 +138,7 @@ fn bilinear_pdfs(
     dirs: &[Vec3],
     out: &mut [f32],
 ) -> bool {
-    if !bilinear_applies(light, d) {
-        return false;
-    }
-    let Some(t) = d.centred_tables() else {
+    let Some(t) = bilinear_tables(light, d) else {
         return false;
     };
     let frame = Frame::of(light);
@@ -187,13 +187,13 @@ fn bilinear_pdfs(
         // SAFETY: i <= mu - 2 and k <= mv - 2, so the corners are inside the
         // mu mv values, the sides inside the nodes, and the patch's CDF entries
         // inside the patch distribution's tables (whose grid is (mu - 1) ×
-        // (mv - 1)); every index fits an i32 (`bilinear_applies`).
+        // (mv - 1)); every index fits an i32 (`bilinear_tables`).
         // Each pair of neighbours (a row's two corners, a cell's two CDF
         // entries) is one 64-bit gather, split into its low and high halves.
         // SAFETY: i <= mu - 2 and k <= mv - 2, so both corners of each row are
         // inside the mu mv values, the sides inside the nodes, and the patch's
         // CDF entries inside the patch distribution's tables (whose grid is
-        // (mu - 1) × (mv - 1)); every index fits an i32 (`bilinear_applies`).
+        // (mu - 1) × (mv - 1)); every index fits an i32 (`bilinear_tables`).
         let pair = |p: *const u32, at: __m256i| unsafe {
             let both = _mm512_i32gather_epi64::<4>(at, p.cast());
             [

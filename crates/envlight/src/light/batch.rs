@@ -3,7 +3,7 @@
 //! angles, cells and lookups are computed side by side in vector lanes, with
 //! kernels compiled for AVX2 where the CPU has it. Bit for bit the single queries.
 
-use super::{solid_angle, EnvironmentLight, LightSample, Mapping, Planar, ROUND_TRIP_MARGIN};
+use super::{clear_of_cell_edges, solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
 use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
@@ -179,11 +179,9 @@ impl EnvironmentLight {
         let (nu, nv) = (nu as f32, nv as f32);
         let mut clear = [false; QUERY_BLOCK];
         for j in 0..QUERY_BLOCK {
-            let inside = |x: f32, cell: u32, n: f32| {
-                let (lo, hi) = (cell as f32 / n, (cell + 1) as f32 / n);
-                x - lo >= ROUND_TRIP_MARGIN && hi - x >= ROUND_TRIP_MARGIN
-            };
-            clear[j] = j < planar.len() && inside(u[j], iu[j], nu) && inside(v[j], iv[j], nv);
+            clear[j] = j < planar.len()
+                && clear_of_cell_edges(u[j], iu[j], nu)
+                && clear_of_cell_edges(v[j], iv[j], nv);
         }
         clear
     }

@@ -486,12 +486,8 @@ impl EnvironmentLight {
     #[inline(always)]
     fn clear_of_edges(&self, s: &Sample2D) -> bool {
         let [nu, nv] = self.table_size();
-        let inside = |x: f32, cell: usize, n: usize| {
-            let n = n as f32;
-            let (lo, hi) = (cell as f32 / n, (cell + 1) as f32 / n);
-            x - lo >= ROUND_TRIP_MARGIN && hi - x >= ROUND_TRIP_MARGIN
-        };
-        inside(s.uv[0], s.cell[0], nu) && inside(s.uv[1], s.cell[1], nv)
+        clear_of_cell_edges(s.uv[0], s.cell[0] as u32, nu as f32)
+            && clear_of_cell_edges(s.uv[1], s.cell[1] as u32, nv as f32)
     }
 
     /// The sample of a piecewise-constant density at a point clear of its cell's
@@ -660,6 +656,14 @@ impl EnvironmentLight {
         let uv = [(x as f32 + 0.5) / w as f32, (row as f32 + 0.5) / h as f32];
         (y * self.options.scale, self.uv_to_direction(uv))
     }
+}
+
+/// Whether `x` lies at least [`ROUND_TRIP_MARGIN`] inside cell `cell` of an axis
+/// of `n` cells (cells fit a u32: sides are at most `MAX_SIDE`).
+#[inline(always)]
+fn clear_of_cell_edges(x: f32, cell: u32, n: f32) -> bool {
+    let (lo, hi) = (cell as f32 / n, (cell + 1) as f32 / n);
+    x - lo >= ROUND_TRIP_MARGIN && hi - x >= ROUND_TRIP_MARGIN
 }
 
 /// The solid-angle density from the planar one at a direction's image point and
