@@ -537,27 +537,15 @@ class TableLight:
                     0.5 * (self._node(iv, h) + self._node(iv + 1, h)))
         return ((self._f(iu) + 0.5) / float(p["table_width"]), (self._f(iv) + 0.5) / float(p["table_height"]))
 
-    def sample(self, xi0, xi1, outer=None):
-        """Draws a direction for ξ ∈ [0, 1)²: ((x, y, z) world, pdf per steradian,
-        (r, g, b), valid). No sample (black light, a pole, a zero-density cell):
-        valid False, pdf and radiance 0, the direction of the image point ξ.
-
-        outer: an optional pair (to_world, to_light) of functions of (x, y, z) that
-        a caller puts around the tables' own frame (a renderer's transform, rounded
-        to its storage type). The direction is settled into its cell through them,
-        so the caller's pdf(to_light(d)) finds the sampled cell too."""
+    def settle(self, u, v, iu, iv, cu, cv, cell_of, outer=None):
+        """The world direction of image point (u, v), drawn in cell (iu, iv), moved
+        toward the cell's centre (cu, cv) until the direction maps back into the cell
+        (at most SETTLE_STEPS times): ((x, y, z), u', v', du dv / dω) with (u', v')
+        the image point the direction maps back to. ``cell_of(u, v)`` gives the cell
+        of an image point; ``outer`` is as in ``sample``."""
         if outer is None:
             outer = (lambda x, y, z: (x, y, z), lambda x, y, z: (x, y, z))
         outer_to_world, outer_to_light = outer
-        if self.black:
-            d = outer_to_world(*self.to_world(*self.uv_to_local(xi0, xi1)))
-            zero = 0.0 * xi0
-            return d, zero, (zero, zero, zero), xi0 != xi0
-        if self.p["density"] == DENSITY_BILINEAR:
-            u, v, iu, iv = self._sample_bilinear(xi0, xi1)
-        else:
-            u, v, iu, iv = self._sample_inversion(xi0, xi1)
-        cu, cv = self._centre_of(iu, iv)
 
         def settled(u, v):
             d = outer_to_world(*self.to_world(*self.uv_to_local(u, v)))
@@ -567,7 +555,7 @@ class TableLight:
         d, bu, bv, inv_j = settled(u, v)
 
         def away(bu, bv):
-            ju, jv = self._cell_of(bu, bv)
+            ju, jv = cell_of(bu, bv)
             return (ju != iu) | (jv != iv)
 
         def cond(k, u, v, step, dx, dy, dz, bu, bv, inv_j):
@@ -584,6 +572,28 @@ class TableLight:
         step0 = 0.0 * u + 1e-3
         state = self._loop((k0, u, v, step0, d[0], d[1], d[2], bu, bv, inv_j), cond, body)
         _, u, v, _, dx, dy, dz, bu, bv, inv_j = state
+        return (dx, dy, dz), bu, bv, inv_j
+
+    def sample(self, xi0, xi1, outer=None):
+        """Draws a direction for ξ ∈ [0, 1)²: ((x, y, z) world, pdf per steradian,
+        (r, g, b), valid). No sample (black light, a pole, a zero-density cell):
+        valid False, pdf and radiance 0, the direction of the image point ξ.
+
+        outer: an optional pair (to_world, to_light) of functions of (x, y, z) that
+        a caller puts around the tables' own frame (a renderer's transform, rounded
+        to its storage type). The direction is settled into its cell through them,
+        so the caller's pdf(to_light(d)) finds the sampled cell too."""
+        if self.black:
+            outer_to_world = outer[0] if outer is not None else (lambda x, y, z: (x, y, z))
+            d = outer_to_world(*self.to_world(*self.uv_to_local(xi0, xi1)))
+            zero = 0.0 * xi0
+            return d, zero, (zero, zero, zero), xi0 != xi0
+        if self.p["density"] == DENSITY_BILINEAR:
+            u, v, iu, iv = self._sample_bilinear(xi0, xi1)
+        else:
+            u, v, iu, iv = self._sample_inversion(xi0, xi1)
+        cu, cv = self._centre_of(iu, iv)
+        (dx, dy, dz), bu, bv, inv_j = self.settle(u, v, iu, iv, cu, cv, self._cell_of, outer)
         pdf = self._solid_angle_pdf(bu, bv, inv_j)
         valid = pdf > 0.0
         rgb = self.lookup(bu, bv)

@@ -930,6 +930,91 @@ impl PyEnvironmentLight {
         Ok(out)
     }
 
+    /// The cosine product sampler's tables as numpy arrays (docs/gpu-tables.md,
+    /// "Product tables"), for a port of `sample_product` / `pdf_product` without
+    /// `outgoing` (the Dr.Jit one in `envlight.mitsuba`): a dict with `cells`
+    /// `[w, h]`, `patches` `[pw, ph]`, `grid`, `col_patch`, `row_patch`,
+    /// `cell_widths` `(h, w)`, `cell_slots` `(w h, 2)`, `spans` `(pw ph, 5)`,
+    /// `table_slots` `(nodes pw ph, 2)`, `table_widths` `(pw ph, nodes)`,
+    /// `node_empty`, `node_totals`, `bright` `(B, 20)` float64, `bright_of_patch`,
+    /// `bound_share`, `box_slack`. Directions in these tables are in the light's
+    /// z-up frame before its rotation.
+    ///
+    /// Raises ValueError for the piecewise-bilinear density (not exported).
+    fn product_tables<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let t = py
+            .detach(|| self.product().cosine_tables())
+            .map_err(to_py_err)?;
+        let [w, h] = t.cells.map(|x| x as usize);
+        let patches = t.spans.len();
+        let nodes = t.node_totals.len();
+        let flat2 = |v: &[[u32; 2]]| -> Vec<u32> { v.iter().flatten().copied().collect() };
+        let out = PyDict::new(py);
+        out.set_item("cells", (t.cells[0], t.cells[1]))?;
+        out.set_item("patches", (t.patches[0], t.patches[1]))?;
+        out.set_item("grid", t.grid)?;
+        out.set_item("col_patch", PyArray1::from_slice(py, &t.col_patch))?;
+        out.set_item("row_patch", PyArray1::from_slice(py, &t.row_patch))?;
+        out.set_item(
+            "cell_widths",
+            PyArray1::from_slice(py, &t.cell_widths).reshape(vec![h, w])?,
+        )?;
+        out.set_item(
+            "cell_slots",
+            PyArray1::from_vec(py, flat2(&t.cell_slots)).reshape(vec![w * h, 2])?,
+        )?;
+        let spans: Vec<u32> = t.spans.iter().flatten().copied().collect();
+        out.set_item(
+            "spans",
+            PyArray1::from_vec(py, spans).reshape(vec![patches, 5])?,
+        )?;
+        out.set_item(
+            "table_slots",
+            PyArray1::from_vec(py, flat2(&t.table_slots)).reshape(vec![nodes * patches, 2])?,
+        )?;
+        out.set_item(
+            "table_widths",
+            PyArray1::from_slice(py, &t.table_widths).reshape(vec![patches, nodes])?,
+        )?;
+        let empty: Vec<u8> = t.node_empty.iter().map(|&e| e as u8).collect();
+        out.set_item("node_empty", PyArray1::from_vec(py, empty))?;
+        out.set_item("node_totals", PyArray1::from_slice(py, &t.node_totals))?;
+        let bright: Vec<f64> = t
+            .bright
+            .iter()
+            .flat_map(|b| {
+                let (axis, cos_half, sin_half) = b.cone;
+                let mut row = vec![b.patch as f64, b.power];
+                row.extend(b.centre);
+                row.extend(axis);
+                row.extend([cos_half, sin_half]);
+                match b.latlong {
+                    Some(l) => {
+                        row.push(1.0);
+                        row.extend(l.edge0);
+                        row.extend(l.edge1);
+                        row.push(if l.narrow { 1.0 } else { 0.0 });
+                        row.extend(l.top);
+                        row.extend(l.bottom);
+                    }
+                    None => row.extend([0.0; 10]),
+                }
+                row
+            })
+            .collect();
+        out.set_item(
+            "bright",
+            PyArray1::from_vec(py, bright).reshape(vec![t.bright.len(), 20])?,
+        )?;
+        out.set_item(
+            "bright_of_patch",
+            PyArray1::from_slice(py, &t.bright_of_patch),
+        )?;
+        out.set_item("bound_share", t.bound_share)?;
+        out.set_item("box_slack", t.box_slack)?;
+        Ok(out)
+    }
+
     /// The map's sun (its brightest compact source, as a uniform disc), or `None`
     /// when it has none (the thresholds are in the Rust docs of `envlight::sun`:
     /// radius ≤ 5°, contrast ≥ 20, ≥ 1% of the power).

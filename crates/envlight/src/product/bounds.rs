@@ -91,6 +91,17 @@ impl LatLongBox {
     /// edges'; then `a sin θ + v_z cos θ = R cos(θ - θ*)` with `R = √(a² + v_z²)`
     /// peaks at `θ* = atan2(a, v_z)` when that is inside `[θ0, θ1]` (the two side
     /// tests below), else at the nearer end, one of the two ends.
+    /// The box as exported (see `ProductTables::bright`).
+    pub fn exported(&self) -> super::export::LatLongPatch {
+        super::export::LatLongPatch {
+            edge0: self.edge0,
+            edge1: self.edge1,
+            narrow: self.narrow,
+            top: [self.top.0, self.top.1],
+            bottom: [self.bottom.0, self.bottom.1],
+        }
+    }
+
     #[inline(always)]
     fn max_dot(&self, v: [f64; 3], rho: f64) -> f64 {
         // Every candidate is computed and the right one selected, without
@@ -117,7 +128,7 @@ impl LatLongBox {
 
 /// Added to [`LatLongBox::max_dot`] for the rounding of f32 directions and of the
 /// rotation into the light frame (about 1e-7 each).
-const BOX_SLACK: f64 = 1e-5;
+pub(super) const BOX_SLACK: f64 = 1e-5;
 
 /// The directions of a patch's lit cells, bounded: a cone, and on a lat-long
 /// light the exact (θ, φ) box of the cells' rectangle.

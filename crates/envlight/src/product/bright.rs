@@ -164,6 +164,29 @@ impl Bright {
     }
 
     /// Bytes held.
+    /// The bright patches as exported (see `ProductTables::bright`).
+    pub fn exported(&self) -> Vec<super::export::BrightPatch> {
+        self.items
+            .iter()
+            .map(|item| super::export::BrightPatch {
+                patch: item.patch,
+                power: item.power,
+                centre: item.centre,
+                cone: (
+                    item.region.cone.axis,
+                    item.region.cone.cos_half,
+                    item.region.cone.sin_half,
+                ),
+                latlong: item.region.latlong.map(|b| b.exported()),
+            })
+            .collect()
+    }
+
+    /// Per patch, its index among the bright ones or 255.
+    pub fn of_patch(&self) -> &[u8] {
+        &self.of_patch
+    }
+
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Item>() * self.items.len() + self.of_patch.len()
     }

@@ -242,6 +242,19 @@ impl Fine {
 
     /// The smallest cell rectangle `[x0, x1, y0, y1]` (ends exclusive) holding
     /// patch `k`'s lit cells, those of non-zero width: `None` if there is none.
+    /// The image's size when the cells are its texels (a piecewise-constant light).
+    pub(super) fn texel_grid(&self) -> Option<[usize; 2]> {
+        matches!(self.cells, Cells::Texels).then_some(self.size)
+    }
+
+    /// Per patch `[x0, y0, cols, rows, first]` (see `ProductTables::spans`).
+    pub(super) fn span_words(&self) -> Vec<[u32; 5]> {
+        self.spans
+            .iter()
+            .map(|s| [s.x0, s.y0, s.cols, s.rows, s.first])
+            .collect()
+    }
+
     fn lit_cells(&self, k: usize) -> Option<[usize; 4]> {
         let mut rect: Option<[usize; 4]> = None;
         for (i, j, _) in self.lit(k) {

@@ -46,6 +46,7 @@
 
 mod bounds;
 mod bright;
+mod export;
 mod factor;
 mod fine;
 mod pick;
@@ -53,6 +54,7 @@ mod tables;
 #[cfg(test)]
 mod tests;
 
+pub use export::{BrightPatch, LatLongPatch, ProductTables};
 pub use factor::Factor;
 
 use crate::distribution::CDF_ONE;
@@ -296,6 +298,41 @@ impl ProductSampler {
         self.fine.memory_bytes()
             + self.bright.memory_bytes()
             + self.built().map(Tables::memory_bytes).sum::<usize>()
+    }
+
+    /// The tables of the cosine factor (`L · cos⁺`) as flat arrays, for a port of
+    /// [`ShadingPoint::sample`] and [`ShadingPoint::pdf`] with
+    /// [`Factor::Cosine`] (layout: docs/gpu-tables.md, "Product tables").
+    ///
+    /// [`Error::Unsupported`](crate::Error::Unsupported) for a light with the
+    /// piecewise-bilinear density (its cells are not exported).
+    pub fn cosine_tables(&self) -> crate::Result<ProductTables> {
+        let mut out = ProductTables {
+            cells: [0; 2],
+            patches: [0; 2],
+            col_patch: Vec::new(),
+            row_patch: Vec::new(),
+            cell_widths: Vec::new(),
+            cell_slots: Vec::new(),
+            spans: Vec::new(),
+            grid: 0,
+            table_slots: Vec::new(),
+            table_widths: Vec::new(),
+            node_empty: Vec::new(),
+            node_totals: Vec::new(),
+            bright: Vec::new(),
+            bright_of_patch: Vec::new(),
+            bound_share: tables::BOUND_SHARE,
+            box_slack: bounds::BOX_SLACK,
+        };
+        if !self.fine.export_into(&mut out) {
+            return Err(crate::Error::Unsupported(
+                "the product tables are exported for the piecewise-constant density only".into(),
+            ));
+        }
+        self.cosine.export_into(&mut out);
+        self.bright.export_into(&mut out);
+        Ok(out)
     }
 
     /// The sampling state at a shading point with factor `factor`: which tables it

@@ -246,6 +246,11 @@ impl Tables {
     }
 
     /// Bytes held.
+    /// `(n, slots, widths, empty, totals)`, for the export.
+    pub fn parts(&self) -> (usize, &[Slot], &[u32], &[bool], &[f64]) {
+        (self.n, &self.slots, &self.widths, &self.empty, &self.totals)
+    }
+
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Slot>() * self.slots.len()
             + 4 * self.widths.len()

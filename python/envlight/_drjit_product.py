@@ -1,0 +1,361 @@
+"""envlight's cosine product sampler (DESIGN.md §6a; the Rust module
+``envlight::product``) evaluated with Dr.Jit operations over its exported tables
+(``EnvironmentLight.product_tables()``, docs/gpu-tables.md, "Product tables").
+
+A shading point with normal n draws directions with density ∝ L(ω) · max(0, n·ω)
+(up to the tables' bounds) and reports that density exactly:
+
+- the point's state, as ``ShadingPoint::move_to`` computes it: the normal's cell in
+  the octahedral grid of normals and the bilinear weights of its four corner
+  tables (f32 placement, f64 weights), and the bright patches' weights at n;
+- a sample, as ``ShadingPoint::sample``: a table or a bright patch from ξ₀, a patch
+  from the table's alias table (ξ₁), a texel from the patch's alias table and a
+  point in it, every pick in f64 and integers as on the CPU;
+- the direction of that point from the light port's f32 mapping (``TableLight``),
+  settled into the sampled texel as the light's samples are, and its pdf evaluated
+  at the returned direction, as ``ShadingPoint::pdf`` evaluates one.
+
+In JIT variants the picks run in ``Float64`` and ``UInt32``, the placement in the
+grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Python
+number (f64). The piecewise-constant density only (the bilinear one's cells are
+not exported).
+"""
+
+import drjit as dr
+import numpy as np
+
+CDF_ONE = 4294967295.0
+INV_CDF_ONE = 1.0 / CDF_ONE
+# 1 − 2⁻⁵³: the largest f64 below 1.
+BELOW_ONE = 1.0 - 2.0**-53
+# Half an f32 quantum of ξ near 1 (f32::EPSILON / 4).
+XI_HALF_QUANTUM = 2.0**-25
+# One unit of a fixed-point CDF: the least share a component with weight keeps.
+MIN_SHARE = 1.0 / CDF_ONE
+NO_BRIGHT = 255
+
+
+class TableProduct:
+    """Cosine product sampling at shading points, from a light's product tables.
+
+    ``tables`` is the dict of ``EnvironmentLight.product_tables()``, ``light`` the
+    ``TableLight`` of the same light's GPU tables (its mapping, rotation, settling
+    and radiance lookup are used), ``mi`` the ``mitsuba`` module with a variant
+    set. Normals and directions are in the world frame of the light's tables."""
+
+    def __init__(self, tables, light, mi):
+        self.light = light
+        self.mi = mi
+        self.jit = light.jit
+        w, h = (int(x) for x in tables["cells"])
+        pw, ph = (int(x) for x in tables["patches"])
+        if (w, h) != (light.p["image_width"], light.p["image_height"]):
+            raise ValueError("the product tables and the light's tables are of different maps")
+        self.w, self.h, self.pw = w, h, pw
+        self.patch_count = pw * ph
+        self.grid = int(tables["grid"])
+        self.nodes = (self.grid + 1) ** 2
+        self.texel_scale = float(w) * float(h) / CDF_ONE
+        self.bound_share = float(tables["bound_share"])
+        self.box_slack = float(tables["box_slack"])
+        empty = np.asarray(tables["node_empty"], dtype=np.uint32)
+        self.any_empty = bool(empty.any())
+        bright = np.asarray(tables["bright"], dtype=np.float64).reshape(-1, 20)
+        # Python floats: numpy scalars would turn Dr.Jit arrays into numpy arrays.
+        self.bright = [[float(x) for x in row] for row in bright]
+
+        def u32(a):
+            return np.ascontiguousarray(np.asarray(a).reshape(-1), dtype=np.uint32)
+
+        arrays = {
+            "col_patch": u32(tables["col_patch"]),
+            "row_patch": u32(tables["row_patch"]),
+            "cell_widths": u32(tables["cell_widths"]),
+            "cell_slots": u32(tables["cell_slots"]),
+            "spans": u32(tables["spans"]),
+            "table_slots": u32(tables["table_slots"]),
+            "table_widths": u32(tables["table_widths"]),
+            "node_empty": empty,
+            "bright_of_patch": u32(tables["bright_of_patch"]),
+        }
+        totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
+        if self.jit:
+            U = mi.UInt32
+            for name, a in arrays.items():
+                setattr(self, name, U(a))
+            self.node_totals = mi.Float64(totals)
+        else:
+            for name, a in arrays.items():
+                setattr(self, name, a)
+            self.node_totals = totals
+
+    # -- backend helpers ------------------------------------------------------------
+
+    def _gather_u(self, table, index, active=True):
+        if self.jit:
+            return dr.gather(self.mi.UInt32, table, index, active)
+        return int(table[int(index)]) if active else 0
+
+    def _gather_f64(self, table, index):
+        if self.jit:
+            return dr.gather(self.mi.Float64, table, index)
+        return float(table[int(index)])
+
+    def _f64(self, x):
+        return self.mi.Float64(x) if self.jit else float(x)
+
+    def _f32(self, x):
+        """An f64 rounded to f32 (an exact conversion of an f32)."""
+        return self.mi.Float(x) if self.jit else float(np.float32(x))
+
+    def _u(self, x):
+        return self.mi.UInt32(x) if self.jit else int(x)
+
+    # -- the shading point ------------------------------------------------------------
+
+    def _octahedral(self, x, y, z):
+        """``sphere_to_octahedral``: (s, t) in [0, 1]² of a nonzero direction (f32)."""
+        inv_l1 = 1.0 / ((dr.abs(x) + dr.abs(y)) + dr.abs(z))
+        a = x * inv_l1
+        b = y * inv_l1
+        lower = z < 0.0
+        a, b = (dr.select(lower, dr.copysign(1.0 - dr.abs(b), a), a),
+                dr.select(lower, dr.copysign(1.0 - dr.abs(a), b), b))
+        return dr.clip(0.5 * a + 0.5, 0.0, 1.0), dr.clip(0.5 * b + 0.5, 0.0, 1.0)
+
+    def _mix(self, x, y, z):
+        """``Tables::mix``: the four corner nodes of the direction's grid cell, their
+        probabilities (f64) and the last with weight."""
+        n = self.grid
+        s, t = self._octahedral(x, y, z)
+        gx = s * float(n)
+        gy = t * float(n)
+        top = float(n - 1)
+        i = self._u(dr.minimum(dr.maximum(gx, 0.0), top))
+        j = self._u(dr.minimum(dr.maximum(gy, 0.0), top))
+        fx = self._f64(dr.clip(gx - self.light._f(i), 0.0, 1.0))
+        fy = self._f64(dr.clip(gy - self.light._f(j), 0.0, 1.0))
+        first = j * (n + 1) + i
+        node = [first, first + 1, first + (n + 1), first + (n + 2)]
+        p = [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy]
+        if self.any_empty:
+            p = [dr.select(self._gather_u(self.node_empty, k) != 0, 0.0, q) for q in p]
+            total = ((p[0] + p[1]) + p[2]) + p[3]
+            positive = total > 0.0
+            safe = dr.select(positive, total, 1.0)
+            p = [dr.select(positive, q / safe, 0.0) for q in p]
+        last = 0 * i
+        for m in (1, 2, 3):
+            last = dr.select(p[m] > 0.0, m, last)
+        return node, p, last
+
+    @staticmethod
+    def _pick4(values, m):
+        """values[m] for a per-lane m in 0..3."""
+        return dr.select(m == 0, values[0], dr.select(m == 1, values[1], dr.select(m == 2, values[2], values[3])))
+
+    def _max_dot(self, item, v0, v1, v2, rho):
+        """``Region::max_dot``: an upper bound of v·ω over the bright patch's directions."""
+        if item[10] != 0.0:
+            e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[11:20]
+            side0 = e00 * v1 - e01 * v0
+            side1 = v0 * e11 - v1 * e10
+            edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
+            if narrow != 0.0:
+                inside_phi = (side0 >= 0.0) & (side1 >= 0.0)
+                a = dr.select(inside_phi, rho, edges)
+            else:
+                a = rho + 0.0 * edges
+            b = v2
+            inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
+            peak = dr.sqrt(a * a + b * b)
+            ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
+            return dr.select(inside_theta, peak, ends) + self.box_slack
+        ax, ay, az, cos_half, sin_half = item[5:10]
+        cos = (v0 * ax + v1 * ay) + v2 * az
+        cx = v1 * az - v2 * ay
+        cy = v2 * ax - v0 * az
+        cz = v0 * ay - v1 * ax
+        sin = dr.sqrt((cx * cx + cy * cy) + cz * cz)
+        return dr.select(cos >= cos_half, 1.0, cos * cos_half + sin * sin_half)
+
+    def point(self, nx, ny, nz):
+        """``ShadingPoint::move_to`` for the cosine at normal (nx, ny, nz) (f32, any
+        length): a dict of the point's state; ``anything`` False where it samples
+        nothing (a zero or non-finite normal, or no light above its horizon)."""
+        length = dr.sqrt((nx * nx + ny * ny) + nz * nz)
+        ok = (length > 0.0) & (length < float("inf"))
+        inv = 1.0 / dr.select(ok, length, 1.0)
+        # The target's normal: normalised, then in the light's frame; the grid cell
+        # from the normal as given in the light's frame (only its direction matters).
+        ux, uy, uz = self.light.to_light(nx * inv, ny * inv, nz * inv)
+        gx, gy, gz = self.light.to_light(nx, ny, nz)
+        safe = dr.select(ok, 1.0, 0.0)
+        node, p, last = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, safe))
+        p_last = self._pick4(p, last)
+        tables = 0.0 * p[0]
+        for m in range(4):
+            tables = tables + p[m] * self._gather_f64(self.node_totals, node[m])
+        tables = dr.select(p_last <= 0.0, 0.0, tables)
+        v0, v1, v2 = self._f64(ux), self._f64(uy), self._f64(uz)
+        rho = dr.sqrt(v0 * v0 + v1 * v1)
+        share = self.bound_share
+        weights = []
+        bright = 0.0 * v0
+        for item in self.bright:
+            power, cx, cy, cz = item[1], item[2], item[3], item[4]
+            value = (v0 * cx + v1 * cy) + v2 * cz
+            upper = dr.maximum(self._max_dot(item, v0, v1, v2, rho), 0.0)
+            g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
+            o = power * dr.select(value >= share * 1.001, value, g)
+            weights.append(o)
+            bright = bright + o
+        total = tables + bright
+        anything = ok & (total > 0.0) & (total < float("inf"))
+        # Shares, each with weight kept at least one CDF unit.
+        only_tables = bright <= 0.0
+        inv_total = 1.0 / dr.select(anything, total, 1.0)
+
+        def floor(x):
+            return dr.select(x > 0.0, dr.maximum(x, MIN_SHARE), 0.0)
+
+        t_share = floor(tables * inv_total)
+        floored = [floor(o * inv_total) for o in weights]
+        s = t_share
+        for o in floored:
+            s = s + o
+        inv_sum = 1.0 / dr.select(s > 0.0, s, 1.0)
+        tables_share = dr.select(only_tables, 1.0, t_share * inv_sum)
+        weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
+        return {"anything": anything, "node": node, "p": p, "last": last,
+                "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights}
+
+    # -- picks ------------------------------------------------------------------------------
+
+    def _alias_pick(self, slots, first, n, x):
+        """``pick::pick`` over the n slots at slot `first` of `slots` (per lane)."""
+        nf = self._f64(n)
+        t = x * nf
+        s = dr.minimum(self._u(t), n - 1)
+        threshold_word = self._gather_u(slots, 2 * (first + s))
+        alias = self._gather_u(slots, 2 * (first + s) + 1)
+        units = (t - self._f64(s)) * CDF_ONE
+        threshold = self._f64(threshold_word)
+        keep = units < threshold
+        index = dr.select(keep, s, alias)
+        offset = dr.select(keep, units, units - threshold)
+        width = dr.select(keep, threshold, CDF_ONE - threshold)
+        safe = dr.select(width != 0.0, width, 1.0)
+        remapped = dr.select(width != 0.0, offset / safe, 0.0)
+        return index, dr.minimum(dr.maximum(remapped, 0.0), BELOW_ONE)
+
+    def _patch_probability(self, state, k):
+        """``ShadingPoint::patch_probability``: patch k's probability at the point."""
+        b = self._gather_u(self.bright_of_patch, k)
+        node, p = state["node"], state["p"]
+        nodes = self.nodes
+        widths = [self._f64(self._gather_u(self.table_widths, k * nodes + node[m])) for m in range(4)]
+        table = ((p[0] * widths[0] + p[1] * widths[1]) + (p[2] * widths[2] + p[3] * widths[3])) * INV_CDF_ONE
+        prob = state["tables_share"] * table
+        for c, weight in enumerate(state["bright"]):
+            prob = dr.select(b == c, weight, prob)
+        return prob
+
+    @staticmethod
+    def _clamp_xi(xi):
+        return dr.minimum(dr.maximum(xi, 0.0) + XI_HALF_QUANTUM, BELOW_ONE)
+
+    def _locate_texel(self, u, v):
+        """(texel column, row, patch) of image point (u, v)."""
+        i = self.light._cell_index(u, self.w)
+        j = self.light._cell_index(v, self.h)
+        k = self._gather_u(self.row_patch, j) * self.pw + self._gather_u(self.col_patch, i)
+        return i, j, k
+
+    def planar_pdf(self, state, u, v):
+        """The density in (u, v) at the point (``ShadingPoint::pdf`` before dω)."""
+        i, j, k = self._locate_texel(u, v)
+        width = self._gather_u(self.cell_widths, j * self.w + i)
+        density = self._f64(width) * self.texel_scale
+        planar = self._f32(self._patch_probability(state, k) * density)
+        return dr.select(state["anything"] & (width > 0), planar, 0.0)
+
+    def pdf(self, nx, ny, nz, dx, dy, dz, state=None):
+        """The pdf per steradian of direction (dx, dy, dz) at normal (nx, ny, nz)."""
+        if state is None:
+            state = self.point(nx, ny, nz)
+        u, v, inv_j = self.light.local_to_uv(*self.light.to_light(dx, dy, dz))
+        pdf = self.planar_pdf(state, u, v) * inv_j
+        return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
+
+    def sample(self, nx, ny, nz, xi0, xi1, outer=None):
+        """A direction for ξ ∈ [0, 1)² at normal (nx, ny, nz): ((x, y, z) world, pdf
+        per steradian, (r, g, b), valid), as ``TableLight.sample`` returns one."""
+        state = self.point(nx, ny, nz)
+        x = self._clamp_xi(self._f64(xi0))
+        y = self._clamp_xi(self._f64(xi1))
+        ts = state["tables_share"]
+        # A table of the mix (`sample_tables`).
+        p = state["p"]
+        xt = dr.minimum(x / dr.select(ts > 0.0, ts, 1.0), BELOW_ONE)
+        ends = [p[0], p[0] + p[1], (p[0] + p[1]) + p[2]]
+        passed = 0 * state["last"]
+        for e in ends:
+            passed = passed + dr.select(xt >= e, 1, 0)
+        m = dr.minimum(passed, state["last"])
+        below = dr.select(m == 0, 0.0, self._pick4([0.0 * xt, ends[0], ends[1], ends[2]], m))
+        pm = self._pick4(p, m)
+        xt = dr.clip((xt - below) / dr.select(pm > 0.0, pm, 1.0), 0.0, BELOW_ONE)
+        node_m = self._pick4(state["node"], m)
+        kt, yt = self._alias_pick(self.table_slots, node_m * self.patch_count, self.patch_count, y)
+        # A bright patch: the first whose running sum passes x.
+        b = 0 * state["last"]
+        start = ts
+        end = ts
+        done = x < ts
+        for c, weight in enumerate(state["bright"]):
+            take = (~done) & (weight > 0.0)
+            b = dr.select(take, c, b)
+            start = dr.select(take, end, start)
+            end = dr.select(take, end + weight, end)
+            done = done | (take & (x < end))
+        weight_b = 0.0 * x
+        patch_b = 0 * b
+        for c, weight in enumerate(state["bright"]):
+            weight_b = dr.select(b == c, weight, weight_b)
+            patch_b = dr.select(b == c, int(self.bright[c][0]), patch_b)
+        xb = dr.clip((x - start) / dr.select(weight_b > 0.0, weight_b, 1.0), 0.0, BELOW_ONE)
+        in_tables = x < ts
+        k = dr.select(in_tables, kt, patch_b)
+        fx = dr.select(in_tables, xt, xb)
+        fy = dr.select(in_tables, yt, y)
+        # A texel of the patch and a point in it (`Fine::sample`).
+        span = 5 * k
+        x0 = self._gather_u(self.spans, span)
+        y0 = self._gather_u(self.spans, span + 1)
+        cols = self._gather_u(self.spans, span + 2)
+        rows = self._gather_u(self.spans, span + 3)
+        first = self._gather_u(self.spans, span + 4)
+        cell, frac_u = self._alias_pick(self.cell_slots, first, cols * rows, fx)
+        inv_cols = 1.0 / self._f64(cols)
+        row = self._u((self._f64(cell) + 0.5) * inv_cols)
+        column = cell - row * cols
+        i = x0 + column
+        j = y0 + row
+        light = self.light
+        u = light._nudge_into_cell(self._f32((self._f64(i) + frac_u) * (1.0 / self.w)), i, self.w)
+        v = light._nudge_into_cell(self._f32((self._f64(j) + fy) * (1.0 / self.h)), j, self.h)
+        cu = (light._f(i) + 0.5) / float(self.w)
+        cv = (light._f(j) + 0.5) / float(self.h)
+
+        def cell_of(bu, bv):
+            return light._cell_index(bu, self.w), light._cell_index(bv, self.h)
+
+        (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, cell_of, outer)
+        pdf = self.planar_pdf(state, bu, bv) * inv_j
+        valid = state["anything"] & (pdf > 0.0) & (pdf < float("inf"))
+        rgb = light.lookup(bu, bv)
+        zero = 0.0 * inv_j
+        pdf = dr.select(valid, pdf, 0.0)
+        rgb = tuple(dr.select(valid, c, zero) for c in rgb)
+        return (dx, dy, dz), pdf, rgb, valid
