@@ -15,9 +15,14 @@ Parameters, in Mitsuba's style:
   Mitsuba (its file resolver and formats) as linear RGB;
 - ``scale`` (float, 1): radiance multiplier; ``to_world`` (transform): as ``envmap``'s,
   the map's frame is ``envmap``'s (y up);
-- ``sampling``: ``"light"`` (the default and, for now, the only one: density ∝ the
-  map's importance; ``"product"``, light × cos⁺ at the interaction's normal, is
-  refused with an error until the product tables are exported);
+- ``sampling``: ``"light"`` (the default: density ∝ the map's importance) or
+  ``"product"`` (density ∝ the map's importance × cos⁺ at the interaction's
+  geometric normal, ``it.n``, from envlight's product tables; an interaction
+  without a normal, in a medium, is sampled as ``"light"``; the
+  piecewise-constant density only). Product samples stay in the hemisphere of
+  ``it.n``: light reaching a surface from behind its geometric normal
+  (transmission, a two-sided material seen from the back) is left to BSDF
+  sampling, which Mitsuba's integrators weight against the emitter's by MIS;
 - envlight's options: ``sampler`` (``"inversion"``), ``density``
   (``"piecewise-constant"``, ``"piecewise-bilinear"``), ``mapping``
   (``"equirectangular"``, ``"equal-area"``) and ``lookup`` (``"node"``, the default,
@@ -36,11 +41,12 @@ import os
 import numpy as np
 
 from . import _native
+from ._drjit_product import TableProduct
 from ._drjit_tables import TableLight
 
 __all__ = ["register"]
 
-SAMPLINGS = ("light",)
+SAMPLINGS = ("light", "product")
 SAMPLERS = ("inversion",)
 DENSITIES = ("piecewise-constant", "piecewise-bilinear")
 MAPPINGS = ("equirectangular", "equal-area")
@@ -145,11 +151,6 @@ def _emitter_class(mi):
         def __init__(self, props):
             super().__init__(props)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
-            if props.get("sampling", "light") == "product":
-                raise ValueError(
-                    'envlight emitter: sampling "product" is not available yet in the Mitsuba emitter '
-                    '(the product tables are not exported to Dr.Jit); use sampling "light"'
-                )
             self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
             self.options = {
                 "sampler": _choice(props, "sampler", SAMPLERS, "inversion"),
@@ -157,6 +158,11 @@ def _emitter_class(mi):
                 "mapping": _choice(props, "mapping", MAPPINGS, "equirectangular"),
                 "lookup": _choice(props, "lookup", LOOKUPS, "node"),
             }
+            if self.sampling == "product" and self.options["density"] != "piecewise-constant":
+                raise ValueError(
+                    'envlight emitter: sampling "product" needs density "piecewise-constant" '
+                    '(the piecewise-bilinear product tables are not exported to Dr.Jit)'
+                )
             scale = props.get("scale", 1.0)
             if not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 0:
                 raise ValueError(f'envlight emitter: "scale" must be a finite number >= 0, got {scale!r}')
@@ -180,6 +186,9 @@ def _emitter_class(mi):
             try:
                 self.light = _native.EnvironmentLight.from_array(np.ascontiguousarray(rgb, np.float32), **self.options)
                 self.tables = TableLight(self.light.gpu_tables(), mv)
+                self.product = None
+                if self.sampling == "product":
+                    self.product = TableProduct(self.light.product_tables(), self.tables, mv)
             except ValueError as e:
                 raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
             if self.tables.jit:
@@ -236,8 +245,30 @@ def _emitter_class(mi):
 
         # -- queries ----------------------------------------------------------------------
 
+        def _has_normal(self, it):
+            return dr.squared_norm(it.n) > 0.0
+
+        def _sample(self, it, sample):
+            """((x, y, z), pdf, rgb, valid) of the emitter's sampling strategy."""
+            if self.product is None:
+                return self.tables.sample(sample.x, sample.y, self._frames())
+            n = self._to_light(it.n)
+            product = self.product.sample(*n, sample.x, sample.y, self._frames())
+            if not self.tables.jit:
+                if self._has_normal(it):
+                    return product
+                return self.tables.sample(sample.x, sample.y, self._frames())
+            # Light samples only where there is no normal (an interaction in a medium).
+            light = self.tables.sample(sample.x, sample.y, self._frames())
+            use = self._has_normal(it)
+            (px, py, pz), ppdf, prgb, pvalid = product
+            (lx, ly, lz), lpdf, lrgb, lvalid = light
+            d = (dr.select(use, px, lx), dr.select(use, py, ly), dr.select(use, pz, lz))
+            rgb = tuple(dr.select(use, a, b) for a, b in zip(prgb, lrgb))
+            return d, dr.select(use, ppdf, lpdf), rgb, dr.select(use, pvalid, lvalid)
+
         def sample_direction(self, it, sample, active=True):
-            (x, y, z), pdf, rgb, valid = self.tables.sample(sample.x, sample.y, self._frames())
+            (x, y, z), pdf, rgb, valid = self._sample(it, sample)
             d = mv.Vector3f(x, y, z)
             active = active & valid
             # Mitsuba does not pass the scene to a Python emitter (set_scene is not
@@ -281,7 +312,13 @@ def _emitter_class(mi):
             raise NotImplementedError("envlight emitter: sample_position() is not defined for an environment")
 
         def pdf_direction(self, it, ds, active=True):
-            pdf = self.tables.pdf(*self._to_light(ds.d))
+            d = self._to_light(ds.d)
+            if self.product is None:
+                pdf = self.tables.pdf(*d)
+            elif not self.tables.jit:
+                pdf = self.product.pdf(*self._to_light(it.n), *d) if self._has_normal(it) else self.tables.pdf(*d)
+            else:
+                pdf = dr.select(self._has_normal(it), self.product.pdf(*self._to_light(it.n), *d), self.tables.pdf(*d))
             return dr.select(active, pdf, 0.0)
 
         def _radiance(self, d_world, active):

@@ -932,25 +932,34 @@ impl PyEnvironmentLight {
 
     /// The cosine product sampler's tables as numpy arrays (docs/gpu-tables.md,
     /// "Product tables"), for a port of `sample_product` / `pdf_product` without
-    /// `outgoing` (the Dr.Jit one in `envlight.mitsuba`): a dict with `cells`
-    /// `[w, h]`, `patches` `[pw, ph]`, `grid`, `col_patch`, `row_patch`,
-    /// `cell_widths` `(h, w)`, `cell_slots` `(w h, 2)`, `spans` `(pw ph, 5)`,
+    /// `outgoing` (the Dr.Jit one in `envlight.mitsuba`): a dict with `density`,
+    /// `image` `[w, h]`, `cells` `[cw, ch]` (the texels, or the cells between the
+    /// bilinear density's nodes, with `node_values` `(h + 2, w + 2)`, `u_nodes`
+    /// and `v_nodes`), `patches` `[pw, ph]`, `grid`, `col_patch`, `row_patch`,
+    /// `cell_widths` `(ch, cw)`, `cell_slots` `(cw ch, 2)`, `spans` `(pw ph, 5)`,
     /// `table_slots` `(nodes pw ph, 2)`, `table_widths` `(pw ph, nodes)`,
     /// `node_empty`, `node_totals`, `bright` `(B, 20)` float64, `bright_of_patch`,
     /// `bound_share`, `box_slack`. Directions in these tables are in the light's
     /// z-up frame before its rotation.
-    ///
-    /// Raises ValueError for the piecewise-bilinear density (not exported).
     fn product_tables<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let t = py
-            .detach(|| self.product().cosine_tables())
-            .map_err(to_py_err)?;
+        let t = py.detach(|| self.product().cosine_tables());
         let [w, h] = t.cells.map(|x| x as usize);
         let patches = t.spans.len();
         let nodes = t.node_totals.len();
         let flat2 = |v: &[[u32; 2]]| -> Vec<u32> { v.iter().flatten().copied().collect() };
         let out = PyDict::new(py);
+        out.set_item("density", t.density.name())?;
+        out.set_item("image", (t.image[0], t.image[1]))?;
         out.set_item("cells", (t.cells[0], t.cells[1]))?;
+        if !t.node_values.is_empty() {
+            let [iw, ih] = t.image.map(|x| x as usize);
+            out.set_item(
+                "node_values",
+                PyArray1::from_slice(py, &t.node_values).reshape(vec![ih + 2, iw + 2])?,
+            )?;
+            out.set_item("u_nodes", PyArray1::from_slice(py, &t.u_nodes))?;
+            out.set_item("v_nodes", PyArray1::from_slice(py, &t.v_nodes))?;
+        }
         out.set_item("patches", (t.patches[0], t.patches[1]))?;
         out.set_item("grid", t.grid)?;
         out.set_item("col_patch", PyArray1::from_slice(py, &t.col_patch))?;

@@ -44,12 +44,24 @@ pub struct LatLongPatch {
 }
 
 /// The tables of a [`ProductSampler`](super::ProductSampler)'s cosine factor
-/// (`L · cos⁺`), flat. Only a piecewise-constant light has them (its cells are
-/// its texels); see [`ProductSampler::cosine_tables`](super::ProductSampler::cosine_tables).
+/// (`L · cos⁺`), flat; see [`ProductSampler::cosine_tables`](super::ProductSampler::cosine_tables).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProductTables {
-    /// The cell grid `[w, h]`: the image's texels.
+    /// The light's density: its cells are the image's `w × h` texels (piecewise
+    /// constant) or the `(w + 1) × (h + 1)` cells between its nodes (piecewise
+    /// bilinear).
+    pub density: crate::light::Density,
+    /// The image's size `[w, h]`.
+    pub image: [u32; 2],
+    /// The cell grid: `[w, h]` or `[w + 1, h + 1]`.
     pub cells: [u32; 2],
+    /// The piecewise-bilinear density's node values, row-major over
+    /// `(h + 2) × (w + 2)` nodes (empty for the piecewise-constant density).
+    pub node_values: Vec<f32>,
+    /// Its node positions along u (`w + 2`); cell `i` spans `u_nodes[i]..u_nodes[i + 1]`.
+    pub u_nodes: Vec<f64>,
+    /// Its node positions along v (`h + 2`).
+    pub v_nodes: Vec<f64>,
     /// Patches across and down, `[pw, ph]`.
     pub patches: [u32; 2],
     /// The patch column of each cell column (`w` entries).
@@ -85,18 +97,16 @@ pub struct ProductTables {
 }
 
 impl Fine {
-    pub(super) fn export_into(&self, out: &mut ProductTables) -> bool {
-        let Some([w, h]) = self.texel_grid() else {
-            return false;
-        };
-        out.cells = [w as u32, h as u32];
+    pub(super) fn export_into(&self, out: &mut ProductTables) {
+        let ([w, h], cells) = self.export_cells(out);
+        out.image = [w as u32, h as u32];
+        out.cells = cells.map(|c| c as u32);
         out.patches = self.patches.map(|p| p as u32);
         out.col_patch = self.col_patch.clone();
         out.row_patch = self.row_patch.clone();
         out.cell_widths = self.widths.clone();
         out.cell_slots = self.slots.iter().map(|s| [s.threshold, s.alias]).collect();
         out.spans = self.span_words();
-        true
     }
 }
 

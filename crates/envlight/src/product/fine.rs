@@ -242,9 +242,26 @@ impl Fine {
 
     /// The smallest cell rectangle `[x0, x1, y0, y1]` (ends exclusive) holding
     /// patch `k`'s lit cells, those of non-zero width: `None` if there is none.
-    /// The image's size when the cells are its texels (a piecewise-constant light).
-    pub(super) fn texel_grid(&self) -> Option<[usize; 2]> {
-        matches!(self.cells, Cells::Texels).then_some(self.size)
+    /// The image's size and the cell grid's, with the density and (for the
+    /// bilinear density) the nodes written to `out`.
+    pub(super) fn export_cells(
+        &self,
+        out: &mut super::export::ProductTables,
+    ) -> ([usize; 2], [usize; 2]) {
+        match &self.cells {
+            Cells::Texels => out.density = Density::PiecewiseConstant,
+            Cells::Bilinear {
+                values,
+                u_nodes,
+                v_nodes,
+            } => {
+                out.density = Density::PiecewiseBilinear;
+                out.node_values = values.clone();
+                out.u_nodes = u_nodes.clone();
+                out.v_nodes = v_nodes.clone();
+            }
+        }
+        (self.size, [self.col_patch.len(), self.row_patch.len()])
     }
 
     /// Per patch `[x0, y0, cols, rows, first]` (see `ProductTables::spans`).

@@ -303,12 +303,14 @@ impl ProductSampler {
     /// The tables of the cosine factor (`L · cos⁺`) as flat arrays, for a port of
     /// [`ShadingPoint::sample`] and [`ShadingPoint::pdf`] with
     /// [`Factor::Cosine`] (layout: docs/gpu-tables.md, "Product tables").
-    ///
-    /// [`Error::Unsupported`](crate::Error::Unsupported) for a light with the
-    /// piecewise-bilinear density (its cells are not exported).
-    pub fn cosine_tables(&self) -> crate::Result<ProductTables> {
+    pub fn cosine_tables(&self) -> ProductTables {
         let mut out = ProductTables {
+            density: Density::PiecewiseConstant,
+            image: [0; 2],
             cells: [0; 2],
+            node_values: Vec::new(),
+            u_nodes: Vec::new(),
+            v_nodes: Vec::new(),
             patches: [0; 2],
             col_patch: Vec::new(),
             row_patch: Vec::new(),
@@ -325,14 +327,10 @@ impl ProductSampler {
             bound_share: tables::BOUND_SHARE,
             box_slack: bounds::BOX_SLACK,
         };
-        if !self.fine.export_into(&mut out) {
-            return Err(crate::Error::Unsupported(
-                "the product tables are exported for the piecewise-constant density only".into(),
-            ));
-        }
+        self.fine.export_into(&mut out);
         self.cosine.export_into(&mut out);
         self.bright.export_into(&mut out);
-        Ok(out)
+        out
     }
 
     /// The sampling state at a shading point with factor `factor`: which tables it
