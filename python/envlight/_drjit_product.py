@@ -17,8 +17,9 @@ A shading point with normal n draws directions with density ∝ L(ω) · max(0, 
 
 In JIT variants the picks run in ``Float64`` and ``UInt32``, the placement in the
 grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Python
-number (f64). The piecewise-constant density only (the bilinear one's cells are
-not exported).
+number (f64). Both densities: the piecewise-constant one's cells are the texels,
+the piecewise-bilinear one's the cells between its nodes, with a point placed in a
+cell by inverting the bilinear function's marginal and conditional (f64).
 """
 
 import drjit as dr
@@ -47,15 +48,19 @@ class TableProduct:
         self.light = light
         self.mi = mi
         self.jit = light.jit
+        iw, ih = (int(x) for x in tables["image"])
         w, h = (int(x) for x in tables["cells"])
         pw, ph = (int(x) for x in tables["patches"])
-        if (w, h) != (light.p["image_width"], light.p["image_height"]):
+        if (iw, ih) != (light.p["image_width"], light.p["image_height"]):
             raise ValueError("the product tables and the light's tables are of different maps")
+        self.bilinear = tables["density"] == "piecewise-bilinear"
+        # Cells: w × h (texels, or (iw + 1) × (ih + 1) between the bilinear nodes).
+        self.iw, self.ih = iw, ih
         self.w, self.h, self.pw = w, h, pw
         self.patch_count = pw * ph
         self.grid = int(tables["grid"])
         self.nodes = (self.grid + 1) ** 2
-        self.texel_scale = float(w) * float(h) / CDF_ONE
+        self.texel_scale = float(iw) * float(ih) / CDF_ONE
         self.bound_share = float(tables["bound_share"])
         self.box_slack = float(tables["box_slack"])
         empty = np.asarray(tables["node_empty"], dtype=np.uint32)
@@ -79,15 +84,22 @@ class TableProduct:
             "bright_of_patch": u32(tables["bright_of_patch"]),
         }
         totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
+        floats = {"node_totals": totals}
+        if self.bilinear:
+            floats["node_values"] = np.ascontiguousarray(tables["node_values"], dtype=np.float64).reshape(-1)
+            floats["u_nodes"] = np.ascontiguousarray(tables["u_nodes"], dtype=np.float64)
+            floats["v_nodes"] = np.ascontiguousarray(tables["v_nodes"], dtype=np.float64)
         if self.jit:
             U = mi.UInt32
             for name, a in arrays.items():
                 setattr(self, name, U(a))
-            self.node_totals = mi.Float64(totals)
+            for name, a in floats.items():
+                setattr(self, name, mi.Float64(a))
         else:
             for name, a in arrays.items():
                 setattr(self, name, a)
-            self.node_totals = totals
+            for name, a in floats.items():
+                setattr(self, name, a)
 
     # -- backend helpers ------------------------------------------------------------
 
@@ -265,18 +277,73 @@ class TableProduct:
     def _clamp_xi(xi):
         return dr.minimum(dr.maximum(xi, 0.0) + XI_HALF_QUANTUM, BELOW_ONE)
 
-    def _locate_texel(self, u, v):
-        """(texel column, row, patch) of image point (u, v)."""
-        i = self.light._cell_index(u, self.w)
-        j = self.light._cell_index(v, self.h)
-        k = self._gather_u(self.row_patch, j) * self.pw + self._gather_u(self.col_patch, i)
-        return i, j, k
+    # -- cells ----------------------------------------------------------------------------
+
+    def _cell_of(self, u, v):
+        """``Fine::cell_of`` on both axes: the cell holding image point (u, v)."""
+        if not self.bilinear:
+            return self.light._cell_index(u, self.iw), self.light._cell_index(v, self.ih)
+
+        # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
+        def axis(x, n):
+            t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
+            return dr.minimum(self._u(t), n)
+
+        return axis(u, self.iw), axis(v, self.ih)
+
+    def _corners(self, i, j):
+        """The four node values (f64) around bilinear cell (i, j): top left, top
+        right, bottom left, bottom right."""
+        mu = self.iw + 2
+        top = j * mu + i
+        bottom = top + mu
+        g = self._gather_f64
+        return (g(self.node_values, top), g(self.node_values, top + 1),
+                g(self.node_values, bottom), g(self.node_values, bottom + 1))
+
+    def _nodes(self, i, j):
+        g = self._gather_f64
+        return (g(self.u_nodes, i), g(self.u_nodes, i + 1), g(self.v_nodes, j), g(self.v_nodes, j + 1))
+
+    @staticmethod
+    def _sample_linear(xi, a, b):
+        """``bilinear::sample_linear`` in f64: x ∈ [0, 1) from the density ∝ a (1 − x) + b x."""
+        denominator = a + dr.sqrt((1.0 - xi) * a * a + xi * b * b)
+        ok = denominator > 0.0
+        x = dr.clip(xi * (a + b) / dr.select(ok, denominator, 1.0), 0.0, BELOW_ONE)
+        return dr.select(a == b, xi, dr.select(ok, x, 0.0))
+
+    def _place(self, axis, cell, x):
+        """``Fine::place``: x rounded to f32, then moved by ulps (at most 4) into `cell`."""
+        light = self.light
+        p = dr.clip(self._f32(x), 0.0, float(np.float32(1.0) - np.float32(2.0**-24)))
+        for _ in range(4):
+            at = self._cell_of(p, p)[axis]
+            p = dr.select(at < cell, light._next_up(p), dr.select(at > cell, light._next_down(p), p))
+        return p
+
+    def _density_in_cell(self, i, j, u, v, width):
+        """``Fine::locate``'s density at (u, v) of cell (i, j) of CDF width `width` (f64)."""
+        if not self.bilinear:
+            return self._f64(width) * self.texel_scale
+        a, b, c, d = self._corners(i, j)
+        u0, u1, v0, v1 = self._nodes(i, j)
+        du = u1 - u0
+        dv = v1 - v0
+        x = dr.clip((self._f64(u) - u0) / dr.select(du != 0.0, du, 1.0), 0.0, 1.0)
+        y = dr.clip((self._f64(v) - v0) / dr.select(dv != 0.0, dv, 1.0), 0.0, 1.0)
+        value = (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
+        mean = 0.25 * (((a + b) + c) + d)
+        area = mean * du * dv
+        density = self._f64(width) * INV_CDF_ONE * value / dr.select(mean > 0.0, area, 1.0)
+        return dr.select(mean > 0.0, density, 0.0)
 
     def planar_pdf(self, state, u, v):
         """The density in (u, v) at the point (``ShadingPoint::pdf`` before dω)."""
-        i, j, k = self._locate_texel(u, v)
+        i, j = self._cell_of(u, v)
+        k = self._gather_u(self.row_patch, j) * self.pw + self._gather_u(self.col_patch, i)
         width = self._gather_u(self.cell_widths, j * self.w + i)
-        density = self._f64(width) * self.texel_scale
+        density = self._density_in_cell(i, j, u, v, width)
         planar = self._f32(self._patch_probability(state, k) * density)
         return dr.select(state["anything"] & (width > 0), planar, 0.0)
 
@@ -343,15 +410,21 @@ class TableProduct:
         i = x0 + column
         j = y0 + row
         light = self.light
-        u = light._nudge_into_cell(self._f32((self._f64(i) + frac_u) * (1.0 / self.w)), i, self.w)
-        v = light._nudge_into_cell(self._f32((self._f64(j) + fy) * (1.0 / self.h)), j, self.h)
-        cu = (light._f(i) + 0.5) / float(self.w)
-        cv = (light._f(j) + 0.5) / float(self.h)
-
-        def cell_of(bu, bv):
-            return light._cell_index(bu, self.w), light._cell_index(bv, self.h)
-
-        (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, cell_of, outer)
+        if self.bilinear:
+            a, b_, c, d = self._corners(i, j)
+            ty = self._sample_linear(fy, a + b_, c + d)
+            tx = self._sample_linear(frac_u, a + (c - a) * ty, b_ + (d - b_) * ty)
+            u0, u1, v0, v1 = self._nodes(i, j)
+            u = self._place(0, i, u0 + tx * (u1 - u0))
+            v = self._place(1, j, v0 + ty * (v1 - v0))
+            cu = self._f32(0.5 * (u0 + u1))
+            cv = self._f32(0.5 * (v0 + v1))
+        else:
+            u = light._nudge_into_cell(self._f32((self._f64(i) + frac_u) * (1.0 / self.iw)), i, self.iw)
+            v = light._nudge_into_cell(self._f32((self._f64(j) + fy) * (1.0 / self.ih)), j, self.ih)
+            cu = (light._f(i) + 0.5) / float(self.iw)
+            cv = (light._f(j) + 0.5) / float(self.ih)
+        (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, self._cell_of, outer)
         pdf = self.planar_pdf(state, bu, bv) * inv_j
         valid = state["anything"] & (pdf > 0.0) & (pdf < float("inf"))
         rgb = light.lookup(bu, bv)

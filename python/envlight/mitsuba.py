@@ -18,8 +18,7 @@ Parameters, in Mitsuba's style:
 - ``sampling``: ``"light"`` (the default: density ∝ the map's importance) or
   ``"product"`` (density ∝ the map's importance × cos⁺ at the interaction's
   geometric normal, ``it.n``, from envlight's product tables; an interaction
-  without a normal, in a medium, is sampled as ``"light"``; the
-  piecewise-constant density only). Product samples stay in the hemisphere of
+  without a normal, in a medium, is sampled as ``"light"``). Product samples stay in the hemisphere of
   ``it.n``: light reaching a surface from behind its geometric normal
   (transmission, a two-sided material seen from the back) is left to BSDF
   sampling, which Mitsuba's integrators weight against the emitter's by MIS;
@@ -158,11 +157,6 @@ def _emitter_class(mi):
                 "mapping": _choice(props, "mapping", MAPPINGS, "equirectangular"),
                 "lookup": _choice(props, "lookup", LOOKUPS, "node"),
             }
-            if self.sampling == "product" and self.options["density"] != "piecewise-constant":
-                raise ValueError(
-                    'envlight emitter: sampling "product" needs density "piecewise-constant" '
-                    '(the piecewise-bilinear product tables are not exported to Dr.Jit)'
-                )
             scale = props.get("scale", 1.0)
             if not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 0:
                 raise ValueError(f'envlight emitter: "scale" must be a finite number >= 0, got {scale!r}')
