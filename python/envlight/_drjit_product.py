@@ -123,6 +123,10 @@ class TableProduct:
     def _u(self, x):
         return self.mi.UInt32(x) if self.jit else int(x)
 
+    def _not(self, mask):
+        # (`~` of a Python bool is an int.)
+        return ~mask if self.jit else not mask
+
     # -- the shading point ------------------------------------------------------------
 
     def _octahedral(self, x, y, z):
@@ -202,8 +206,7 @@ class TableProduct:
         # from the normal as given in the light's frame (only its direction matters).
         ux, uy, uz = self.light.to_light(nx * inv, ny * inv, nz * inv)
         gx, gy, gz = self.light.to_light(nx, ny, nz)
-        safe = dr.select(ok, 1.0, 0.0)
-        node, p, last = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, safe))
+        node, p, last = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
         p_last = self._pick4(p, last)
         tables = 0.0 * p[0]
         for m in range(4):
@@ -381,7 +384,7 @@ class TableProduct:
         end = ts
         done = x < ts
         for c, weight in enumerate(state["bright"]):
-            take = (~done) & (weight > 0.0)
+            take = self._not(done) & (weight > 0.0)
             b = dr.select(take, c, b)
             start = dr.select(take, end, start)
             end = dr.select(take, end + weight, end)
