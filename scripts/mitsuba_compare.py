@@ -9,10 +9,10 @@ under MAP with Mitsuba's path integrator, and prints a markdown sheet:
   independent renders of each: the image mean difference in standard errors and the
   share of 8x8 blocks whose mean differs by more than 4 standard errors;
 - cost: seconds per render (after the first, which compiles), envlight over envmap;
-- error at equal time: RMSE against a high-sample envmap reference for envmap and
-  envlight (sampling="light"), each given the samples that fit in envmap's time
-  (spp scaled by the measured cost ratio). (sampling="product" is not available in
-  the Mitsuba emitter yet.)
+- error at equal time: RMSE against a high-sample envmap reference for envmap,
+  envlight with sampling="light" and envlight with sampling="product" (light x cos+
+  at the normal), each given the samples that fit in envmap's time (spp scaled by
+  the measured cost ratio).
 
 With --out, writes the images (PNG, tone-mapped) and the sheet (compare.md) there.
 Needs Mitsuba 3 (pip install mitsuba) and, for LLVM variants, DRJIT_LIBLLVM_PATH.
@@ -110,6 +110,7 @@ def main(argv=None):
     parser.add_argument("--seeds", type=int, default=16, help="independent renders per emitter")
     parser.add_argument("--reference-spp", type=int, default=4096)
     parser.add_argument("--lookup", default="node")
+    parser.add_argument("--density", default=None, help="envlight's density (default: the emitter's)")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
 
@@ -120,9 +121,12 @@ def main(argv=None):
 
     envmap = {"type": "envmap", "filename": args.map}
     light = {"type": "envlight", "filename": args.map, "lookup": args.lookup}
+    if args.density:
+        light["density"] = args.density
+    product = dict(light, sampling="product")
     seeds = list(range(args.seeds))
     scenes = {name: build_scene(mi, em, args.spp) for name, em in
-              [("envmap", envmap), ("envlight light", light)]}
+              [("envmap", envmap), ("envlight light", light), ("envlight product", product)]}
     stacks, seconds = {}, {}
     for name, scene in scenes.items():
         # Independent seeds per emitter: the agreement's standard errors assume it.
@@ -132,8 +136,9 @@ def main(argv=None):
     ref_scene = build_scene(mi, envmap, args.reference_spp)
     reference = render(mi, ref_scene, 123_456)
 
+    density = args.density or "the emitter's default density"
     lines = [f"map `{os.path.basename(args.map)}`, {args.variant}, path integrator (max_depth 4), 96x64, "
-             f"{args.spp} spp, {args.seeds} independent renders per emitter, reference envmap at "
+             f"lookup {args.lookup}, {density}, {args.spp} spp, {args.seeds} independent renders per emitter, reference envmap at "
              f"{args.reference_spp} spp", ""]
     lines.append("| emitter | s / render | cost vs envmap | mean diff vs envmap (SE) | 8x8 blocks > 4 SE | "
                  "RMSE equal spp | RMSE equal time | RMSE ratio equal time |")
