@@ -793,3 +793,71 @@ fn product_beats_the_light_alone() {
         );
     }
 }
+
+/// The exported cosine tables are the sampler's own: every lit patch's cell widths
+/// and every non-empty node's patch widths sum to `CDF_ONE`, each alias table gives
+/// every entry exactly its width, spans tile the cell grid, and the bright patches
+/// are where `bright_of_patch` says.
+#[test]
+fn exported_cosine_tables_are_consistent() {
+    for c in cases() {
+        let t = c.sampler.cosine_tables();
+        let [cw, ch] = t.cells.map(|x| x as usize);
+        let nodes = (t.grid as usize + 1).pow(2);
+        let patches = t.spans.len();
+        assert_eq!(patches, (t.patches[0] * t.patches[1]) as usize, "{}", c.name);
+        assert_eq!(t.cell_widths.len(), cw * ch, "{}", c.name);
+        assert_eq!(t.cell_slots.len(), cw * ch, "{}", c.name);
+        assert_eq!(t.table_widths.len(), patches * nodes, "{}", c.name);
+        assert_eq!(t.table_slots.len(), patches * nodes, "{}", c.name);
+        let received = |slots: &[[u32; 2]]| {
+            let mut got = vec![0u128; slots.len()];
+            for (s, &[threshold, alias]) in slots.iter().enumerate() {
+                got[s] += threshold as u128;
+                got[alias as usize] += (CDF_ONE - threshold) as u128;
+            }
+            got
+        };
+        let mut covered = vec![0u8; cw * ch];
+        for [x0, y0, cols, rows, first] in t.spans.iter().map(|s| s.map(|x| x as usize)) {
+            let mut widths = Vec::new();
+            for j in y0..y0 + rows {
+                for i in x0..x0 + cols {
+                    widths.push(t.cell_widths[j * cw + i] as u64);
+                    covered[j * cw + i] += 1;
+                }
+            }
+            let sum: u64 = widths.iter().sum();
+            assert!(sum == 0 || sum == CDF_ONE as u64, "{}", c.name);
+            if sum > 0 {
+                let got = received(&t.cell_slots[first..first + cols * rows]);
+                for (g, w) in got.iter().zip(&widths) {
+                    assert_eq!(*g, (cols * rows) as u128 * *w as u128, "{}", c.name);
+                }
+            }
+        }
+        assert!(covered.iter().all(|&n| n == 1), "{}", c.name);
+        for m in 0..nodes {
+            let widths: Vec<u64> = (0..patches)
+                .map(|k| t.table_widths[k * nodes + m] as u64)
+                .collect();
+            let sum: u64 = widths.iter().sum();
+            assert_eq!(sum == 0, t.node_empty[m], "{}", c.name);
+            if sum > 0 {
+                assert_eq!(sum, CDF_ONE as u64, "{}", c.name);
+                let got = received(&t.table_slots[m * patches..(m + 1) * patches]);
+                for (g, w) in got.iter().zip(&widths) {
+                    assert_eq!(*g, patches as u128 * *w as u128, "{}", c.name);
+                }
+            }
+        }
+        for (b, bright) in t.bright.iter().enumerate() {
+            assert_eq!(t.bright_of_patch[bright.patch as usize] as usize, b, "{}", c.name);
+        }
+        let marked = t.bright_of_patch.iter().filter(|&&b| b != 255).count();
+        assert_eq!(marked, t.bright.len(), "{}", c.name);
+        let bilinear = c.sampler.density() == Density::PiecewiseBilinear;
+        assert_eq!(t.density, c.sampler.density(), "{}", c.name);
+        assert_eq!(!t.node_values.is_empty(), bilinear, "{}", c.name);
+    }
+}
