@@ -63,8 +63,11 @@ class TableProduct:
         self.texel_scale = float(iw) * float(ih) / CDF_ONE
         self.bound_share = float(tables["bound_share"])
         self.box_slack = float(tables["box_slack"])
-        empty = np.asarray(tables["node_empty"], dtype=np.uint32)
+        empty = np.asarray(tables["node_empty"], dtype=bool)
         self.any_empty = bool(empty.any())
+        # An empty table is one of total 0: the mix reads the totals only.
+        if not np.array_equal(empty, np.asarray(tables["node_totals"]) == 0.0):
+            raise ValueError("the product tables' empty nodes are not those of total 0")
         bright = np.asarray(tables["bright"], dtype=np.float64).reshape(-1, 20)
         # Python floats: numpy scalars would turn Dr.Jit arrays into numpy arrays.
         self.bright = [[float(x) for x in row] for row in bright]
@@ -76,11 +79,8 @@ class TableProduct:
             "col_patch": u32(tables["col_patch"]),
             "row_patch": u32(tables["row_patch"]),
             "cell_widths": u32(tables["cell_widths"]),
-            "cell_slots": u32(tables["cell_slots"]),
             "spans": u32(tables["spans"]),
-            "table_slots": u32(tables["table_slots"]),
             "table_widths": u32(tables["table_widths"]),
-            "node_empty": empty,
             "bright_of_patch": u32(tables["bright_of_patch"]),
         }
         totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
@@ -89,6 +89,11 @@ class TableProduct:
             floats["node_values"] = np.ascontiguousarray(tables["node_values"], dtype=np.float64).reshape(-1)
             floats["u_nodes"] = np.ascontiguousarray(tables["u_nodes"], dtype=np.float64)
             floats["v_nodes"] = np.ascontiguousarray(tables["v_nodes"], dtype=np.float64)
+        for name in ("cell_slots", "table_slots"):
+            # (threshold, alias) pairs as one little-endian 64-bit word each.
+            pairs = u32(tables[name])
+            words = pairs.view(np.uint64) if pairs.size else np.zeros(1, np.uint64)
+            setattr(self, name, mi.UInt64(words) if self.jit else words)
         if self.jit:
             U = mi.UInt32
             for name, a in arrays.items():
@@ -107,6 +112,14 @@ class TableProduct:
         if self.jit:
             return dr.gather(self.mi.UInt32, table, index, active)
         return int(table[int(index)]) if active else 0
+
+    def _slot(self, slots, index):
+        """(threshold, alias) of an alias-table slot, read as one 64-bit word."""
+        if self.jit:
+            word = dr.gather(self.mi.UInt64, slots, index)
+            return self.mi.UInt32(word & 0xFFFFFFFF), self.mi.UInt32(word >> 32)
+        word = int(slots[int(index)])
+        return word & 0xFFFFFFFF, word >> 32
 
     def _gather_f64(self, table, index):
         if self.jit:
@@ -141,7 +154,7 @@ class TableProduct:
 
     def _mix(self, x, y, z):
         """``Tables::mix``: the four corner nodes of the direction's grid cell, their
-        probabilities (f64) and the last with weight."""
+        probabilities (f64), the last with weight and the nodes' totals."""
         n = self.grid
         s, t = self._octahedral(x, y, z)
         gx = s * float(n)
@@ -154,8 +167,9 @@ class TableProduct:
         first = j * (n + 1) + i
         node = [first, first + 1, first + (n + 1), first + (n + 2)]
         p = [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy]
+        totals = [self._gather_f64(self.node_totals, k) for k in node]
         if self.any_empty:
-            p = [dr.select(self._gather_u(self.node_empty, k) != 0, 0.0, q) for q in p]
+            p = [dr.select(t == 0.0, 0.0, q) for q, t in zip(p, totals)]
             total = ((p[0] + p[1]) + p[2]) + p[3]
             positive = total > 0.0
             safe = dr.select(positive, total, 1.0)
@@ -163,7 +177,7 @@ class TableProduct:
         last = 0 * i
         for m in (1, 2, 3):
             last = dr.select(p[m] > 0.0, m, last)
-        return node, p, last
+        return node, p, last, totals
 
     @staticmethod
     def _pick4(values, m):
@@ -206,11 +220,11 @@ class TableProduct:
         # from the normal as given in the light's frame (only its direction matters).
         ux, uy, uz = self.light.to_light(nx * inv, ny * inv, nz * inv)
         gx, gy, gz = self.light.to_light(nx, ny, nz)
-        node, p, last = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
+        node, p, last, totals = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
         p_last = self._pick4(p, last)
         tables = 0.0 * p[0]
         for m in range(4):
-            tables = tables + p[m] * self._gather_f64(self.node_totals, node[m])
+            tables = tables + p[m] * totals[m]
         tables = dr.select(p_last <= 0.0, 0.0, tables)
         v0, v1, v2 = self._f64(ux), self._f64(uy), self._f64(uz)
         rho = dr.sqrt(v0 * v0 + v1 * v1)
@@ -252,8 +266,7 @@ class TableProduct:
         nf = self._f64(n)
         t = x * nf
         s = dr.minimum(self._u(t), n - 1)
-        threshold_word = self._gather_u(slots, 2 * (first + s))
-        alias = self._gather_u(slots, 2 * (first + s) + 1)
+        threshold_word, alias = self._slot(slots, first + s)
         units = (t - self._f64(s)) * CDF_ONE
         threshold = self._f64(threshold_word)
         keep = units < threshold
@@ -266,12 +279,14 @@ class TableProduct:
 
     def _patch_probability(self, state, k):
         """``ShadingPoint::patch_probability``: patch k's probability at the point."""
-        b = self._gather_u(self.bright_of_patch, k)
         node, p = state["node"], state["p"]
         nodes = self.nodes
         widths = [self._f64(self._gather_u(self.table_widths, k * nodes + node[m])) for m in range(4)]
         table = ((p[0] * widths[0] + p[1] * widths[1]) + (p[2] * widths[2] + p[3] * widths[3])) * INV_CDF_ONE
         prob = state["tables_share"] * table
+        if not self.bright:
+            return prob
+        b = self._gather_u(self.bright_of_patch, k)
         for c, weight in enumerate(state["bright"]):
             prob = dr.select(b == c, weight, prob)
         return prob
