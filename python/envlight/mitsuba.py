@@ -247,19 +247,23 @@ def _emitter_class(mi):
             if self.product is None:
                 return self.tables.sample(sample.x, sample.y, self._frames())
             n = self._to_light(it.n)
-            product = self.product.sample(*n, sample.x, sample.y, self._frames())
             if not self.tables.jit:
                 if self._has_normal(it):
-                    return product
+                    return self.product.sample(*n, sample.x, sample.y, self._frames())
                 return self.tables.sample(sample.x, sample.y, self._frames())
-            # Light samples only where there is no normal (an interaction in a medium).
-            light = self.tables.sample(sample.x, sample.y, self._frames())
-            use = self._has_normal(it)
-            (px, py, pz), ppdf, prgb, pvalid = product
-            (lx, ly, lz), lpdf, lrgb, lvalid = light
-            d = (dr.select(use, px, lx), dr.select(use, py, ly), dr.select(use, pz, lz))
-            rgb = tuple(dr.select(use, a, b) for a, b in zip(prgb, lrgb))
-            return d, dr.select(use, ppdf, lpdf), rgb, dr.select(use, pvalid, lvalid)
+            # Light samples only where there is no normal (an interaction in a
+            # medium), in a symbolic branch: the other lanes do not pay for them.
+            def flat(sample):
+                (x, y, z), pdf, (r, g, b), valid = sample
+                return x, y, z, pdf, r, g, b, valid
+
+            x, y, z, pdf, r, g, b, valid = dr.if_stmt(
+                args=(sample.x, sample.y, n[0], n[1], n[2]),
+                cond=self._has_normal(it),
+                true_fn=lambda u0, u1, nx, ny, nz: flat(self.product.sample(nx, ny, nz, u0, u1, self._frames())),
+                false_fn=lambda u0, u1, nx, ny, nz: flat(self.tables.sample(u0, u1, self._frames())),
+            )
+            return (x, y, z), pdf, (r, g, b), valid
 
         def sample_direction(self, it, sample, active=True):
             (x, y, z), pdf, rgb, valid = self._sample(it, sample)
