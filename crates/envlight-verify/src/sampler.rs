@@ -177,11 +177,28 @@ impl SphereSampler for EnvironmentLight {
         // The pdf lives on the texels of the light's own image, in its own mapping
         // (for an equal-area light, the resampled square).
         let to_world = self.options().rotation;
+        let (h, options) = (self.image().height(), self.options());
+        let node_rows = options.lookup == envlight::Lookup::Node;
         Some(match self.mapping() {
+            // The node lookup's piecewise-bilinear density lives on the `h - 1`
+            // intervals between its node rows `k/(h-1)` (where the radiance has
+            // its kinks too), bilinear on each: a uniform grid of those rows.
+            envlight::light::Mapping::Equirectangular
+                if node_rows
+                    && h >= 2
+                    && options.density == envlight::light::Density::PiecewiseBilinear =>
+            {
+                Grid::Equirect {
+                    width: self.image().width(),
+                    height: h - 1,
+                    node_rows: false,
+                    to_world,
+                }
+            }
             envlight::light::Mapping::Equirectangular => Grid::Equirect {
                 width: self.image().width(),
                 height: self.image().height(),
-                node_rows: self.options().lookup == envlight::Lookup::Node,
+                node_rows,
                 to_world,
             },
             envlight::light::Mapping::EqualArea => Grid::EqualArea {

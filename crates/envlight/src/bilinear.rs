@@ -9,7 +9,10 @@
 //! for a `w × h` image with u periodic and v clamped, `U = 0, (i + ½)/w, 1` with the
 //! seam average `(f[j][w-1] + f[j][0]) / 2` at both `u = 0` and `u = 1`, and
 //! `V = 0, (j + ½)/h, 1` with copies of the first and last texel rows at `v = 0` and
-//! `v = 1`.
+//! `v = 1`. Nodes may repeat (a patch of zero width, which has no mass and is
+//! never sampled nor found by a lookup inside `[0, 1]`): Mitsuba's lat-long
+//! reading, whose rows are nodes from pole to pole, is
+//! `V = 0, 0, j/(h - 1), 1, 1` in the same `h + 2` rows.
 //!
 //! Sampling picks a patch, then a point in it. The patches' masses
 //! `M_ik = (U_{i+1} - U_i)(V_{k+1} - V_k)(f_00 + f_10 + f_01 + f_11) / 4` (exact for
@@ -114,7 +117,8 @@ impl BilinearDistribution2D {
     /// [`Error::InvalidOption`] when either node list has fewer than 2 entries, is
     /// not strictly increasing, does not start at exactly 0 and end at exactly 1, or
     /// holds a non-finite value; or when `values.len() != u_nodes.len() *
-    /// v_nodes.len()`.
+    /// v_nodes.len()`. Repeated nodes are allowed: the patch between them has no
+    /// width, so no mass.
     pub fn try_new(values: &[f32], u_nodes: &[f64], v_nodes: &[f64]) -> Result<Self> {
         check_nodes("u", u_nodes)?;
         check_nodes("v", v_nodes)?;
@@ -195,6 +199,23 @@ impl BilinearDistribution2D {
     pub(crate) fn texel_centre_cells(&self) -> Option<[usize; 2]> {
         let (w, h) = (self.u.cells, self.v.cells);
         (w > 0.0 && h > 0.0).then_some([w as usize, h as usize])
+    }
+
+    /// `([w, h], node_rows)` when the nodes are one of the layouts the light
+    /// builds: along u the texel centres of `w` texels, along v the texel centres
+    /// of `h` texels (`node_rows` false) or the node rows `0, 0, j/(h - 1), 1, 1`
+    /// of `h ≥ 2` rows (true); else `None`.
+    pub(crate) fn image_cells(&self) -> Option<([usize; 2], bool)> {
+        let w = self.u.cells as usize;
+        if w == 0 {
+            None
+        } else if self.v.cells > 0.0 {
+            Some(([w, self.v.cells as usize], false))
+        } else if self.v.rows > 0.0 {
+            Some(([w, self.v.rows as usize + 1], true))
+        } else {
+            None
+        }
     }
 
     /// The tables of the texel-centre layout for kernels that gather them
@@ -551,7 +572,8 @@ fn pdf_from_corners(
     }
 }
 
-/// Checks one axis's node positions.
+/// Checks one axis's node positions: from exactly 0 to exactly 1, never
+/// decreasing (a repeated node is a patch of zero width).
 fn check_nodes(axis: &str, nodes: &[f64]) -> Result<()> {
     let bad = |why: &str| {
         Err(Error::InvalidOption(format!(
@@ -567,8 +589,8 @@ fn check_nodes(axis: &str, nodes: &[f64]) -> Result<()> {
     if nodes[0] != 0.0 || nodes[nodes.len() - 1] != 1.0 {
         return bad("must start at 0 and end at 1");
     }
-    if nodes.windows(2).any(|w| w[0] >= w[1]) {
-        return bad("not strictly increasing");
+    if nodes.windows(2).any(|w| w[0] > w[1]) {
+        return bad("decreasing");
     }
     Ok(())
 }
@@ -603,10 +625,19 @@ fn cdf_linear(x: f64, a: f64, b: f64) -> f64 {
 }
 
 /// The patch of `nodes` holding `x ∈ [0, 1]`: the last `i ≤ n - 2` with
-/// `nodes[i] <= x`.
+/// `nodes[i] <= x` and `nodes[i] < 1`, which has positive width (with repeated
+/// nodes, `nodes[i] <= x` alone would give a zero-width patch `[1, 1]` at
+/// `x = 1`).
 #[inline]
 fn patch_of(nodes: &[f64], x: f64) -> usize {
-    nodes[1..nodes.len() - 1].partition_point(|&n| n <= x)
+    nodes[1..nodes.len() - 1].partition_point(|&n| below(n, x))
+}
+
+/// Whether node `n` is at or below `x` and below 1: the predicate that
+/// [`patch_of`] counts the interior nodes by (true for a prefix of them).
+#[inline(always)]
+fn below(n: f64, x: f64) -> bool {
+    n <= x && n < 1.0
 }
 
 /// A guide to [`patch_of`]: with `G = nodes.len() - 1` equal cells over `[0, 1]`,
@@ -628,7 +659,7 @@ fn guided_patch(nodes: &[f64], guide: &[u32], x: f64) -> usize {
     // One guide cell of margin either side absorbs the rounding of x·G.
     let lo = guide[g.saturating_sub(1)] as usize;
     let hi = guide[(g + 2).min(cells)] as usize;
-    lo + nodes[lo + 1..=hi].partition_point(|&n| n <= x)
+    lo + nodes[lo + 1..=hi].partition_point(|&n| below(n, x))
 }
 
 /// The corners `[f_00, f_10, f_01, f_11]` of patch `[i, k]` of the node values
@@ -664,6 +695,9 @@ struct Axis {
     /// ([`centred_cells`]), whose patches are found with one multiplication;
     /// else 0.
     cells: f64,
+    /// `m` when the nodes are the node-row layout `0, 0, k/m for k ≤ m, 1, 1`
+    /// ([`node_rows`]), likewise found with one multiplication; else 0.
+    rows: f64,
 }
 
 impl Axis {
@@ -673,6 +707,7 @@ impl Axis {
             nodes: nodes.to_vec(),
             guide: guide(nodes),
             cells: centred_cells(nodes),
+            rows: node_rows(nodes),
         }
     }
 
@@ -684,7 +719,7 @@ impl Axis {
     /// The patch holding `x ∈ [0, 1]` ([`locate_patch`]).
     #[inline(always)]
     fn patch(&self, x: f64) -> usize {
-        locate_patch(&self.nodes, &self.guide, self.cells, x)
+        locate_patch(&self.nodes, &self.guide, [self.cells, self.rows], x)
     }
 
     /// The ends of patch `i`.
@@ -731,16 +766,36 @@ fn centred_cells(nodes: &[f64]) -> f64 {
     }
 }
 
-/// [`patch_of`] for `x` that is an `f32` in `[0, 1]`: `⌊x n + ½⌋` for the
-/// texel-centre layout over `cells = n > 0` texels, else through the guide. For
-/// `n < 2²⁸` the two agree exactly: `x n + ½` is exact in `f64`, and an `f32`
-/// that is not a node `(2j + 1) / 2n` is at least `2⁻²⁴ / 2n` (relative) from it,
-/// far more than the node's rounding to `f64`, which so cannot flip a comparison.
+/// `m` when `nodes` are `0, 0, k/m for k ≤ m, 1, 1` exactly as written here (the
+/// node-row layout of an image of `m + 1 ≥ 2` rows), else 0.
+fn node_rows(nodes: &[f64]) -> f64 {
+    let m = nodes.len().saturating_sub(3);
+    let rows = m >= 1
+        && nodes[0] == 0.0
+        && nodes[m + 2] == 1.0
+        && (0..=m).all(|k| nodes[k + 1] == k as f64 / m as f64);
+    if rows {
+        m as f64
+    } else {
+        0.0
+    }
+}
+
+/// [`patch_of`] for `x` that is an `f32` in `[0, 1]`, with `[cells, rows]` of the
+/// [`Axis`]: `⌊x n + ½⌋` for the texel-centre layout over `cells = n > 0` texels,
+/// `1 + min(⌊x m⌋, m - 1)` for the node-row layout over `rows = m > 0` intervals,
+/// else through the guide. For `n, m < 2²⁸` they agree exactly: `x n + ½` and
+/// `x m` are exact in `f64`, and an `f32` that is not a node `(2j + 1) / 2n` (or
+/// `k / m`) is at least `2⁻²⁴ / 2n` (relative) from it, far more than the node's
+/// rounding to `f64`, which so cannot flip a comparison.
 #[inline(always)]
-fn locate_patch(nodes: &[f64], guide: &[u32], cells: f64, x: f64) -> usize {
+fn locate_patch(nodes: &[f64], guide: &[u32], [cells, rows]: [f64; 2], x: f64) -> usize {
     if cells > 0.0 {
         // x ∈ [0, 1], so the floor is in [0, n] (n at x = 1, the last patch).
         (x * cells + 0.5) as usize
+    } else if rows > 0.0 {
+        // Patch 0 and m + 1 are the zero-width ones at the ends.
+        1 + ((x * rows) as usize).min(rows as usize - 1)
     } else {
         guided_patch(nodes, guide, x)
     }
@@ -968,18 +1023,36 @@ mod tests {
         }
     }
 
-    /// The texel-centre shortcut finds the patch the node comparisons find, for
-    /// every f32 near each node (the nodes themselves, the f32 steps either side)
-    /// and for random f32, on widths that are and are not powers of two.
+    /// The texel-centre and node-row shortcuts find the patch the node
+    /// comparisons find, for every f32 near each node (the nodes themselves, the
+    /// f32 steps either side) and for random f32, on sides that are and are not
+    /// powers of two; the node rows never give a zero-width end patch.
     #[test]
     fn centred_lookup_matches_the_node_comparisons() {
         let mut rng = SplitMix64::new(41);
-        for n in [1usize, 2, 3, 7, 96, 1000, 1024, 4097, 16384] {
+        let centred = |n: usize| {
             let mut nodes = vec![0.0];
             nodes.extend((0..n).map(|j| (j as f64 + 0.5) / n as f64));
             nodes.push(1.0);
-            let cells = centred_cells(&nodes);
-            assert_eq!(cells, n as f64);
+            nodes
+        };
+        let rows = |n: usize| {
+            let mut nodes = vec![0.0];
+            nodes.extend((0..n).map(|j| j as f64 / (n - 1) as f64));
+            nodes.push(1.0);
+            nodes
+        };
+        let layouts = [1usize, 2, 3, 7, 96, 1000, 1024, 4097, 16384]
+            .into_iter()
+            .map(|n| (n, centred(n), [n as f64, 0.0]))
+            .chain(
+                [2usize, 3, 7, 96, 1000, 1025, 4097, 16385]
+                    .into_iter()
+                    .map(|n| (n, rows(n), [0.0, (n - 1) as f64])),
+            );
+        for (n, nodes, shortcut) in layouts {
+            assert_eq!([centred_cells(&nodes), node_rows(&nodes)], shortcut);
+            let cells = shortcut;
             let g = guide(&nodes);
             let mut probes: Vec<f32> = vec![0.0, 1.0, ONE_MINUS_EPSILON];
             for &x in &nodes {
@@ -994,16 +1067,17 @@ mod tests {
             probes.extend((0..20_000).map(|_| rng.next_f32()));
             for x in probes {
                 let x = (x as f64).clamp(0.0, 1.0);
-                assert_eq!(
-                    locate_patch(&nodes, &g, cells, x),
-                    patch_of(&nodes, x),
-                    "n {n} x {x}"
-                );
+                let patch = locate_patch(&nodes, &g, cells, x);
+                assert_eq!(patch, patch_of(&nodes, x), "n {n} x {x}");
+                assert_eq!(patch, locate_patch(&nodes, &g, [0.0; 2], x), "n {n} x {x}");
+                assert!(nodes[patch] < nodes[patch + 1], "n {n} x {x}");
             }
         }
         let uneven = [0.0, 0.3, 1.0];
         assert_eq!(centred_cells(&uneven), 0.0);
         assert_eq!(centred_cells(&[0.0, 1.0]), 0.0);
+        assert_eq!(node_rows(&uneven), 0.0);
+        assert_eq!(node_rows(&[0.0, 0.0, 1.0, 1.0]), 1.0);
     }
 
     #[test]
@@ -1155,6 +1229,37 @@ mod tests {
         }
     }
 
+    /// Repeated end nodes (the node-row layout) make zero-width patches: they
+    /// hold no mass, no sample lands in them, and no point of `[0, 1]` is looked
+    /// up in them, not even the ends, so the density there is the neighbours'.
+    #[test]
+    fn zero_width_patches_are_never_sampled_nor_found() {
+        let (u, v) = ([0.0, 0.5, 1.0], [0.0, 0.0, 0.5, 1.0, 1.0]);
+        // B = 1 + v' in the real patches (rows 1..=3 at v = 0, ½, 1: 1, 1.5, 2),
+        // end rows copies; ∫B = 1.5, so p(u, v) = (1 + v) / 1.5.
+        let values = [
+            1.0f32, 1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 1.5, 1.5, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0,
+        ];
+        let d = BilinearDistribution2D::new(&values, &u, &v);
+        assert!((d.integral() - 1.5).abs() < 1e-12);
+        for (y, want) in [(0.0f32, 1.0), (0.25, 1.25), (1.0, 2.0)] {
+            let pdf = d.pdf([0.3, y]);
+            assert!(close(pdf, (want / 1.5) as f32, 1e-6), "v {y}: {pdf}");
+        }
+        assert_eq!(d.locate([0.3, 0.0]).0[1], 1);
+        assert_eq!(d.locate([0.3, 1.0]).0[1], 2);
+        for k in 0..20_000 {
+            let s = d.sample_continuous(xi_2d(13, k));
+            assert!((1..=2).contains(&s.cell[1]) && s.pdf > 0.0, "{s:?}");
+            assert_eq!(d.pdf(s.uv), s.pdf);
+        }
+        for &b in &[0.0f32, 1e-30, ONE_MINUS_EPSILON, 1.0] {
+            let s = d.sample_continuous([0.5, b]);
+            assert!((1..=2).contains(&s.cell[1]) && s.pdf > 0.0, "{s:?}");
+            assert!(d.invert(s.uv).iter().all(|x| (0.0..=1.0).contains(x)));
+        }
+    }
+
     #[test]
     fn all_zero_and_invalid_inputs() {
         let d = BilinearDistribution2D::new(
@@ -1170,7 +1275,8 @@ mod tests {
         assert!(d.invert([0.2, 0.4]).iter().all(|x| x.is_finite()));
         let ok = [0.0, 1.0];
         assert!(BilinearDistribution2D::try_new(&[1.0; 4], &[0.0], &ok).is_err());
-        assert!(BilinearDistribution2D::try_new(&[1.0; 8], &[0.0, 0.5, 0.5, 1.0], &ok).is_err());
+        // Repeated nodes are a zero-width patch, allowed; decreasing ones are not.
+        assert!(BilinearDistribution2D::try_new(&[1.0; 8], &[0.0, 0.5, 0.5, 1.0], &ok).is_ok());
         assert!(BilinearDistribution2D::try_new(&[1.0; 8], &[0.0, 0.7, 0.5, 1.0], &ok).is_err());
         assert!(BilinearDistribution2D::try_new(&[1.0; 4], &[0.1, 1.0], &ok).is_err());
         assert!(BilinearDistribution2D::try_new(&[1.0; 4], &[0.0, 0.9], &ok).is_err());
@@ -1184,9 +1290,9 @@ mod tests {
     }
 
     #[test]
-    #[should_panic(expected = "strictly increasing")]
+    #[should_panic(expected = "decreasing")]
     fn new_panics_on_bad_nodes() {
-        BilinearDistribution2D::new(&[1.0; 8], &[0.0, 0.5, 0.5, 1.0], &[0.0, 1.0]);
+        BilinearDistribution2D::new(&[1.0; 8], &[0.0, 0.7, 0.5, 1.0], &[0.0, 1.0]);
     }
 
     /// Node values at texel centres plus the square's edges (seam averages in u,

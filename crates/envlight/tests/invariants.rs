@@ -153,6 +153,18 @@ invariant_cases! {
     alias_hot_top_row_node:        combo(hot(64, 32, 20, 0), Node, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
     hierarchical_hot_seam_node:    combo(hot(64, 32, 63, 20), Node, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
     table_quarter_hot_top_row_node: table(hot(64, 32, 21, 0), Node, Inversion, 16), FULL;
+    // The node lookup with the piecewise-bilinear density (nodes on its rows, pole
+    // to pole): two rows (both poles), odd sides, hot pole rows, rotated.
+    bilinear_density_random_node:       combo(random(91, 37, 91), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_two_rows_node:     combo(random(16, 2, 4), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_three_rows_node:   combo(random(5, 3, 8), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_hot_top_row_node:  combo(hot(64, 32, 20, 0), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_hot_bottom_node:   combo(hot(63, 33, 41, 32), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_hot_second_node:   combo(hot(64, 32, 5, 1), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_hot_seam_node:     combo(hot(64, 32, 63, 20), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
+    bilinear_density_one_row_node:      combo(gradient(64, 1), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
+    bilinear_density_rotated_sky_node:  combo(envlight::builtin::sky(256, 128), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
+    bilinear_density_rotated_random_node: combo(random(48, 24, 7), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
     // The same importance through other samplers of the grid (one line each).
     alias_random_bilinear:         combo(random(91, 37, 91), Bilinear, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
     alias_hot_top_row_nearest:     combo(hot(64, 32, 20, 0), Nearest, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
@@ -214,6 +226,7 @@ black_cases! {
     black_nearest:        light(black(16, 8), Nearest);
     black_bilinear:       light(black(16, 8), Bilinear);
     black_node:           light(black(16, 8), Node);
+    black_bilinear_density_node: combo(black(16, 8), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0);
     black_one_texel:      light(black(1, 1), Bilinear);
     black_wide:           light(black(4096, 1), Bilinear);
 }

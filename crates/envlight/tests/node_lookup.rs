@@ -1,6 +1,7 @@
 //! `Lookup::Node`, Mitsuba 3 envmap's reading of a lat-long map: exact values on
-//! tiny images, the batch queries equal to the one-point ones, and the options it
-//! refuses. (Its sampling invariants are in `invariants.rs`, `*_node` cases.)
+//! tiny images, the batch queries equal to the one-point ones, the bilinear
+//! density's nodes on its rows, and the options it refuses. (Its sampling
+//! invariants are in `invariants.rs`, `*_node` cases.)
 
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Vec3, WrapU};
@@ -67,10 +68,16 @@ fn batch_queries_equal_the_single_ones() {
         [x, 0.5 * x + 0.1, if (i + j) % 5 == 0 { 0.0 } else { 1.0 }]
     })
     .unwrap();
-    for sampler in [Sampler::Inversion, Sampler::Alias, Sampler::Hierarchical] {
+    for (sampler, density) in [
+        (Sampler::Inversion, Density::PiecewiseConstant),
+        (Sampler::Alias, Density::PiecewiseConstant),
+        (Sampler::Hierarchical, Density::PiecewiseConstant),
+        (Sampler::Inversion, Density::PiecewiseBilinear),
+    ] {
         let options = LightOptions {
             lookup: Lookup::Node,
             sampler,
+            density,
             rotation: Rotation::about_z_degrees(25.0),
             ..Default::default()
         };
@@ -99,8 +106,8 @@ fn batch_queries_equal_the_single_ones() {
         light.pdf_batch(&dirs, &mut pdfs);
         light.radiance_batch(&dirs, &mut radiance);
         for ((d, p), r) in dirs.iter().zip(&pdfs).zip(&radiance) {
-            assert_eq!(light.pdf(*d), *p, "{sampler:?} {d:?}");
-            assert_eq!(light.radiance(*d), *r, "{sampler:?} {d:?}");
+            assert_eq!(light.pdf(*d), *p, "{sampler:?} {density:?} {d:?}");
+            assert_eq!(light.radiance(*d), *r, "{sampler:?} {density:?} {d:?}");
         }
     }
 }
@@ -108,23 +115,73 @@ fn batch_queries_equal_the_single_ones() {
 #[test]
 fn the_node_lookup_refuses_what_it_does_not_cover() {
     let img = image_3x4();
-    for (mapping, density, what) in [
-        (Mapping::EqualArea, Density::PiecewiseConstant, "equal-area"),
-        (
-            Mapping::Equirectangular,
-            Density::PiecewiseBilinear,
-            "piecewise-bilinear",
-        ),
-    ] {
+    for density in [Density::PiecewiseConstant, Density::PiecewiseBilinear] {
         let options = LightOptions {
             lookup: Lookup::Node,
-            mapping,
+            mapping: Mapping::EqualArea,
             density,
             ..Default::default()
         };
         let err = EnvironmentLight::new(img.clone(), options)
             .unwrap_err()
             .to_string();
-        assert!(err.contains(what), "{err}");
+        assert!(err.contains("equal-area"), "{err}");
+    }
+}
+
+/// The piecewise-bilinear density of the node lookup puts `Y · J` on the rows,
+/// pole to pole (`v = j/(h − 1)`), with the poles' `J` the mean of `sin π v` over
+/// the half cell next to them: exact values of the density, relative to each
+/// other, on a 3×4 map at texel centres along u.
+#[test]
+fn the_bilinear_density_of_the_node_lookup_has_its_nodes_on_the_rows() {
+    let img = image_3x4();
+    let light = EnvironmentLight::new(
+        img,
+        LightOptions {
+            lookup: Lookup::Node,
+            density: Density::PiecewiseBilinear,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let pi = std::f64::consts::PI;
+    let half = pi / 6.0; // π Δ/2 with Δ = 1/3
+    let pole = (1.0 - half.cos()) / half;
+    // Planar density ∝ Y J: the solid-angle pdf times the Jacobian 2π² sin θ.
+    let planar = |i: usize, v: f64| {
+        let u = (i as f64 + 0.5) / 3.0;
+        let (d, _) = envlight::mapping::equirect_to_direction(u as f32, v as f32);
+        light.pdf(d) as f64 * 2.0 * pi * pi * (pi * v).sin()
+    };
+    let value = |row: usize, col: usize| (10 * row + col + 1) as f64;
+    let factor = |row: usize| match row {
+        0 | 3 => pole,
+        _ => (pi * row as f64 / 3.0).sin(),
+    };
+    let reference = planar(1, 0.5) / (0.5 * (value(1, 1) * factor(1) + value(2, 1) * factor(2)));
+    for (row, v) in [(1usize, 1.0 / 3.0), (2, 2.0 / 3.0)] {
+        for col in 0..3 {
+            let want = value(row, col) * factor(row) * reference;
+            let got = planar(col, v);
+            assert!(
+                (got - want).abs() <= 1e-4 * want,
+                "row {row} col {col}: {got} vs {want}"
+            );
+        }
+    }
+    // Next to the poles (the pdf is finite there, its Jacobian 0 at them): the
+    // interpolation between the pole row and the next.
+    for (row, next, v, t) in [(0usize, 1usize, 0.05, 0.15), (3, 2, 0.95, 0.15)] {
+        for col in 0..3 {
+            let want = ((1.0 - t) * value(row, col) * factor(row)
+                + t * value(next, col) * factor(next))
+                * reference;
+            let got = planar(col, v);
+            assert!(
+                (got - want).abs() <= 1e-4 * want,
+                "v {v} col {col}: {got} vs {want}"
+            );
+        }
     }
 }

@@ -158,7 +158,7 @@ macro_rules! cosine_cases {
 }
 
 use Density::{PiecewiseBilinear, PiecewiseConstant};
-use Lookup::{Bilinear, Nearest};
+use Lookup::{Bilinear, Nearest, Node};
 use Mapping::{EqualArea, Equirectangular};
 
 cosine_cases! {
@@ -170,6 +170,8 @@ cosine_cases! {
     cosine_sky:                    default_light(sky());
     cosine_sky_rotated:            light(sky(), Bilinear, PiecewiseConstant, Equirectangular, 37.0);
     cosine_sky_bilinear_density:   light(sky(), Bilinear, PiecewiseBilinear, Equirectangular, 0.0);
+    cosine_sky_node_bilinear_density: light(sky(), Node, PiecewiseBilinear, Equirectangular, 37.0);
+    cosine_hot_pole_node_bilinear_density: light(hot(64, 32, 20, 0), Node, PiecewiseBilinear, Equirectangular, 0.0);
     cosine_sky_equal_area:         light(sky(), Bilinear, PiecewiseConstant, EqualArea, 0.0);
     cosine_random_equal_area:      light(random(91, 37, 91), Nearest, PiecewiseConstant, EqualArea, 37.0);
     cosine_one_texel:              default_light(constant(1, 1));

@@ -58,14 +58,26 @@ impl EnvironmentLight {
                 tables.push_inversion(d, &mut p)?;
             }
             Planar::Bilinear(d) => {
-                if d.texel_centre_cells() != Some([w, h]) || d.values().len() != (w + 2) * (h + 2) {
+                let Some(([cw, ch], node_rows)) = d.image_cells() else {
                     return Err(Error::Unsupported(
                         "the GPU tables hold a piecewise-bilinear density only on the \
-                         texel-centre node grid"
+                         light's node grids"
+                            .into(),
+                    ));
+                };
+                if [cw, ch] != [w, h] || d.values().len() != (w + 2) * (h + 2) {
+                    return Err(Error::Unsupported(
+                        "the GPU tables hold a piecewise-bilinear density only on the \
+                         light's node grids"
                             .into(),
                     ));
                 }
                 p[param::SAMPLER] = value::SAMPLER_INVERSION;
+                p[param::BILINEAR_V_NODES] = if node_rows {
+                    value::V_NODES_NODE_ROWS
+                } else {
+                    value::V_NODES_TEXEL_CENTRES
+                };
                 p[param::DENSITY] = value::DENSITY_PIECEWISE_BILINEAR;
                 tables.push_inversion(d.patches(), &mut p)?;
                 let values = d.values().iter().map(|x| x.to_bits());

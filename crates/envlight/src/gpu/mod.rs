@@ -133,7 +133,7 @@ pub mod param {
     pub const DENSITY: usize = 26;
     /// `u32`: 0 = equirectangular, 1 = equal-area octahedral square.
     pub const MAPPING: usize = 27;
-    /// `u32`: 0 = nearest, 1 = bilinear.
+    /// `u32`: 0 = nearest, 1 = bilinear, 2 = node rows (Mitsuba's envmap).
     pub const LOOKUP: usize = 28;
     /// `u32`: 0 = RGB `f32`, 1 = RGBA `f16`.
     pub const RADIANCE_FORMAT: usize = 29;
@@ -177,8 +177,12 @@ pub mod param {
     pub const BILINEAR_VALUES: usize = 48;
     /// `u32`: length of the tables buffer in words.
     pub const TABLES_WORDS: usize = 49;
-    /// Words 50–63: reserved, 0.
-    pub const RESERVED: usize = 50;
+    /// `u32`: where the piecewise-bilinear density's nodes sit along v: 0 = texel
+    /// centres `0, (j + ½)/h, 1`, 1 = node rows `0, 0, j/(h − 1), 1, 1` (the node
+    /// lookup's, `h ≥ 2`); 0 for the piecewise-constant density.
+    pub const BILINEAR_V_NODES: usize = 50;
+    /// Words 51–63: reserved, 0.
+    pub const RESERVED: usize = 51;
 
     /// The word holding section `id`'s offset in the tables buffer, for the
     /// sampling sections (ids 2–8).
@@ -218,6 +222,10 @@ pub mod value {
     /// [`super::param::LOOKUP`]: bilinear with rows as nodes from pole to pole
     /// (Mitsuba's envmap; [`crate::Lookup::Node`]).
     pub const LOOKUP_NODE: u32 = 2;
+    /// [`super::param::BILINEAR_V_NODES`]: texel centres.
+    pub const V_NODES_TEXEL_CENTRES: u32 = 0;
+    /// [`super::param::BILINEAR_V_NODES`]: the node lookup's rows, pole to pole.
+    pub const V_NODES_NODE_ROWS: u32 = 1;
     /// [`super::param::RADIANCE_FORMAT`]: RGB `f32`, 3 words per texel.
     pub const RADIANCE_F32: u32 = 0;
     /// [`super::param::RADIANCE_FORMAT`]: RGBA `f16`, 2 words per texel.

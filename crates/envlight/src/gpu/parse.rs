@@ -270,7 +270,6 @@ fn expected_sampling(p: &[u32; PARAMS_WORDS]) -> std::result::Result<Vec<Placed>
         (param::SAMPLER, "sampler"),
         (param::DENSITY, "density"),
         (param::MAPPING, "mapping"),
-        (param::LOOKUP, "lookup"),
         (param::RADIANCE_FORMAT, "radiance_format"),
         (param::ROTATED, "rotated"),
         (param::BLACK, "black"),
@@ -282,8 +281,30 @@ fn expected_sampling(p: &[u32; PARAMS_WORDS]) -> std::result::Result<Vec<Placed>
             ));
         }
     }
+    if p[param::LOOKUP] > value::LOOKUP_NODE {
+        return Err(format!(
+            "parameter lookup (word {}) is {}, not 0, 1 or 2",
+            param::LOOKUP,
+            p[param::LOOKUP]
+        ));
+    }
     let bilinear = p[param::DENSITY] == value::DENSITY_PIECEWISE_BILINEAR;
     let alias = p[param::SAMPLER] == value::SAMPLER_ALIAS;
+    let v_nodes = p[param::BILINEAR_V_NODES];
+    let node_rows_allowed = bilinear
+        && p[param::LOOKUP] == value::LOOKUP_NODE
+        && p[param::MAPPING] == value::MAPPING_EQUIRECTANGULAR
+        && p[param::IMAGE_HEIGHT] >= 2;
+    if !(v_nodes == value::V_NODES_TEXEL_CENTRES
+        || (v_nodes == value::V_NODES_NODE_ROWS && node_rows_allowed))
+    {
+        return Err(format!(
+            "parameter bilinear_v_nodes (word {}) is {v_nodes}: 0, or 1 (node rows) only \
+             for the piecewise-bilinear density with the node lookup on an equirectangular \
+             map of at least 2 rows",
+            param::BILINEAR_V_NODES
+        ));
+    }
     if bilinear && alias {
         return Err(
             "the parameters name the alias sampler with the piecewise-bilinear \

@@ -30,8 +30,9 @@ fn tilted() -> Rotation {
     Rotation::about_z_degrees(37.0).then_after(about_x)
 }
 
-/// Every supported light: sampler × density, both mappings, both lookups, a
-/// rotation, a scale, MIS compensation, a reduced table, a black map.
+/// Every supported light: sampler × density, both mappings, every lookup (the
+/// node lookup on the lat-long map only), a rotation, a scale, MIS compensation,
+/// a reduced table, a black map.
 fn lights() -> Vec<(String, EnvironmentLight)> {
     let mut out = Vec::new();
     let cases = [
@@ -41,7 +42,10 @@ fn lights() -> Vec<(String, EnvironmentLight)> {
     ];
     for (sampler, density) in cases {
         for mapping in Mapping::ALL {
-            for lookup in [Lookup::Nearest, Lookup::Bilinear] {
+            for lookup in [Lookup::Nearest, Lookup::Bilinear, Lookup::Node] {
+                if lookup == Lookup::Node && mapping != Mapping::Equirectangular {
+                    continue;
+                }
                 for (rotation, scale, compensate, table) in [
                     (Rotation::IDENTITY, 1.0, false, None),
                     (tilted(), 2.5, true, None),
@@ -82,10 +86,16 @@ fn lights() -> Vec<(String, EnvironmentLight)> {
         };
         // Tables of 1 and 2 cells a side: guides of one entry, shift 32.
         for (w, h) in [(4, 2), (2, 1)] {
-            out.push((
-                format!("tiny {w}x{h} {} {}", sampler.name(), density.name()),
-                EnvironmentLight::new(map(w, h), options).unwrap(),
-            ));
+            for lookup in [Lookup::Bilinear, Lookup::Node] {
+                out.push((
+                    format!(
+                        "tiny {w}x{h} {} {} {lookup:?}",
+                        sampler.name(),
+                        density.name()
+                    ),
+                    EnvironmentLight::new(map(w, h), LightOptions { lookup, ..options }).unwrap(),
+                ));
+            }
         }
         let black = EnvImage::from_fn(8, 4, |_, _| [0.0; 3]).unwrap();
         out.push((
@@ -618,6 +628,25 @@ impl Flat<'_> {
         }
     }
 
+    /// Whether the bilinear density's v nodes are the node rows
+    /// `0, 0, j/(h − 1), 1, 1` (else the texel centres).
+    fn node_rows(&self) -> bool {
+        self.u(param::BILINEAR_V_NODES) == 1
+    }
+
+    /// The node position `k` along v of `h` rows, either layout.
+    fn v_node(&self, k: usize, h: usize) -> f64 {
+        if !self.node_rows() {
+            Self::node(k, h)
+        } else if k == 0 {
+            0.0
+        } else if k > h {
+            1.0
+        } else {
+            (k - 1) as f64 / (h - 1) as f64
+        }
+    }
+
     /// The planar density at `uv`, or `None` within 1e-5 of a cell (patch) edge.
     fn planar_pdf(&self, [u, v]: [f32; 2]) -> Option<f64> {
         let (u, v) = (u as f64, v as f64);
@@ -637,10 +666,16 @@ impl Flat<'_> {
             return Some((tw * th) as f64 * self.cell_probability(iu, iv));
         }
         let (w, h) = (self.u(param::IMAGE_WIDTH), self.u(param::IMAGE_HEIGHT));
-        let (i, k) = (cell(u, w, 0.5, w)?, cell(v, h, 0.5, h)?);
+        // Node rows: patch 1 + ⌊v (h − 1)⌋ (the zero-width ends never).
+        let k = if self.node_rows() {
+            cell(v, h - 1, 1.0, h - 1)?
+        } else {
+            cell(v, h, 0.5, h)?
+        };
+        let i = cell(u, w, 0.5, w)?;
         let [f00, f10, f01, f11] = self.corners(i, k);
         let (u0, u1) = (Self::node(i, w), Self::node(i + 1, w));
-        let (v0, v1) = (Self::node(k, h), Self::node(k + 1, h));
+        let (v0, v1) = (self.v_node(k, h), self.v_node(k + 1, h));
         let (x, y) = ((u - u0) / (u1 - u0), (v - v0) / (v1 - v0));
         let b = (1.0 - y) * ((1.0 - x) * f00 + x * f10) + y * ((1.0 - x) * f01 + x * f11);
         let mass = (u1 - u0) * (v1 - v0) * (f00 + f10 + f01 + f11) / 4.0;
@@ -727,7 +762,7 @@ impl Flat<'_> {
         let y = linear(r, a + b, c + d);
         let x = linear(s, lerp(y, a, c), lerp(y, b, d));
         let (u0, u1) = (Self::node(iu, w), Self::node(iu + 1, w));
-        let (v0, v1) = (Self::node(iv, h), Self::node(iv + 1, h));
+        let (v0, v1) = (self.v_node(iv, h), self.v_node(iv + 1, h));
         ([iu, iv], [lerp(x, u0, u1), lerp(y, v0, v1)])
     }
 
@@ -809,9 +844,14 @@ fn gpu_reference_sampling_from_flat_tables_picks_the_lights_cells() {
             let (cell, uv) = flat.sample_uv(xi);
             let light_cell = if bilinear {
                 let (w, h) = (flat.u(param::IMAGE_WIDTH), flat.u(param::IMAGE_HEIGHT));
+                let v = s.uv[1] as f64;
                 [
                     ((s.uv[0] as f64 * w as f64 + 0.5) as usize).min(w),
-                    ((s.uv[1] as f64 * h as f64 + 0.5) as usize).min(h),
+                    if flat.node_rows() {
+                        1 + ((v * (h - 1) as f64) as usize).min(h - 2)
+                    } else {
+                        ((v * h as f64 + 0.5) as usize).min(h)
+                    },
                 ]
             } else {
                 // As the light finds cells: the product in f32.

@@ -116,7 +116,9 @@ pub(super) fn sample_chunk(
 }
 
 /// The tables [`bilinear_pdfs`] reads for `d`, where it runs: the lat-long map,
-/// the texel-centre layout, tables small enough for 32-bit gather indices.
+/// the texel-centre layout (not the node lookup's node rows along v, whose
+/// nodes `j/(h − 1)` it does not compute: `centred_tables` is `None` for them),
+/// tables small enough for 32-bit gather indices.
 fn bilinear_tables<'a>(
     light: &EnvironmentLight,
     d: &'a BilinearDistribution2D,

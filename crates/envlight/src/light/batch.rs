@@ -910,6 +910,14 @@ mod tests {
                 Lookup::Nearest,
                 Mapping::EqualArea,
             ),
+            // Node rows along v: the AVX-512 kernels decline them (their nodes
+            // are texel centres), the others locate patches through the nodes.
+            (
+                Sampler::Inversion,
+                Density::PiecewiseBilinear,
+                Lookup::Node,
+                Mapping::Equirectangular,
+            ),
         ] {
             // Rotated and not: the AVX-512 kernels skip the rotation for the identity.
             let cases = [0.0, 20.0].into_iter().flat_map(|degrees| {

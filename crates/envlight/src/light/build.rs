@@ -26,7 +26,7 @@ impl EnvironmentLight {
     /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
     /// bilinear density is asked of a sampler other than inversion, an equal-area
     /// input is not square, an equal-area input is asked for a lat-long light, or
-    /// the node lookup is asked of the equal-area mapping or the bilinear density.
+    /// the node lookup is asked of the equal-area mapping.
     pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
         Self::with_progress(image, options, &|_| {})
     }
@@ -56,23 +56,11 @@ impl EnvironmentLight {
                 options.sampler.name()
             )));
         }
-        if options.lookup == Lookup::Node {
-            // The node lookup is the equirectangular map's (Mitsuba's envmap); the
-            // piecewise-bilinear density's nodes sit at texel centres, whose
-            // support does not cover it near the poles.
-            if options.mapping != Mapping::Equirectangular {
-                return Err(Error::InvalidOption(
-                    "the node lookup reads equirectangular maps only, not the equal-area square"
-                        .into(),
-                ));
-            }
-            if options.density == Density::PiecewiseBilinear {
-                return Err(Error::InvalidOption(
-                    "the node lookup needs the piecewise-constant density (the piecewise-bilinear \
-                     density's nodes are texel centres)"
-                        .into(),
-                ));
-            }
+        // The node lookup is the equirectangular map's (Mitsuba's envmap).
+        if options.lookup == Lookup::Node && options.mapping != Mapping::Equirectangular {
+            return Err(Error::InvalidOption(
+                "the node lookup reads equirectangular maps only, not the equal-area square".into(),
+            ));
         }
         let image = match (options.input_mapping, options.mapping) {
             (Mapping::Equirectangular, Mapping::Equirectangular) => image,
@@ -247,12 +235,12 @@ fn build_sampler(
                 .into_par_iter()
                 .map(|j| rgb_sum(image.row(j)))
                 .collect();
-            let (mut values, u_nodes, v_nodes) = bilinear_nodes(image, mapping);
+            let (mut values, u_nodes, v_nodes) = bilinear_nodes(image, mapping, options.lookup);
             let (mu, mv) = (u_nodes.len(), v_nodes.len());
             let mut compensated = false;
             if options.mis_compensation {
-                // Nodes carry Y·J at their own v; subtract Ȳ·J node by node.
-                let factors: Vec<f64> = v_nodes.iter().map(|&v| mapping.area_factor(v)).collect();
+                // Nodes carry Y·J; subtract Ȳ·J node row by node row.
+                let factors = node_row_factors(&v_nodes, mapping, node_rows(h, options.lookup));
                 if let Some(c) = compensate_rows(&values, mu, mv, &factors) {
                     values = c;
                     compensated = true;
@@ -327,12 +315,23 @@ fn compensate_rows(f: &[f32], cols: usize, rows: usize, factors: &[f64]) -> Opti
     any.then_some(out)
 }
 
-/// Node values and positions of the piecewise-bilinear density: `Y · J` at every
-/// texel centre, plus edge nodes at u = 0, 1 and v = 0, 1 that reproduce the
-/// lookup's edge behaviour (the seam average for periodic u; a copy of the edge
-/// texels for clamped u and for v). Returns `(values, u_nodes, v_nodes)`, values
-/// row-major over `(h + 2) × (w + 2)` nodes.
-pub(crate) fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
+/// Node values and positions of the piecewise-bilinear density: `Y · J` at the
+/// nodes of the lookup's reconstruction, plus edge nodes at u = 0, 1 and v = 0, 1
+/// that reproduce its edge behaviour (the seam average for periodic u; a copy of
+/// the edge texels for clamped u and for v). Returns `(values, u_nodes,
+/// v_nodes)`, values row-major over `(h + 2) × (w + 2)` nodes.
+///
+/// Along u the nodes are the texel centres `0, (i + ½)/w, 1`. Along v they are
+/// the texel centres `0, (j + ½)/h, 1` too, except for [`Lookup::Node`] on a map of
+/// `h ≥ 2` rows, whose rows are nodes from pole to pole: `0, 0, j/(h - 1), 1, 1`,
+/// the end rows copies of the poles' (zero-width cells, never sampled). `J` is
+/// [`node_row_factors`]'s. (One row is constant in v with either lookup, so it
+/// keeps the texel-centre layout.)
+pub(crate) fn bilinear_nodes(
+    image: &EnvImage,
+    mapping: Mapping,
+    lookup: Lookup,
+) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
     let (w, h) = (image.width(), image.height());
     let centres = |n: usize| -> Vec<f64> {
         let mut nodes = Vec::with_capacity(n + 2);
@@ -341,13 +340,24 @@ pub(crate) fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, V
         nodes.push(1.0);
         nodes
     };
-    let (u_nodes, v_nodes) = (centres(w), centres(h));
+    let node_rows = node_rows(h, lookup);
+    let v_nodes = if node_rows {
+        let mut nodes = Vec::with_capacity(h + 2);
+        nodes.push(0.0);
+        nodes.extend((0..h).map(|j| j as f64 / (h - 1) as f64));
+        nodes.push(1.0);
+        nodes
+    } else {
+        centres(h)
+    };
+    let u_nodes = centres(w);
+    let factors = node_row_factors(&v_nodes, mapping, node_rows);
     let mu = w + 2;
     let mut values = vec![0.0f32; mu * (h + 2)];
     values.par_chunks_mut(mu).enumerate().for_each(|(k, out)| {
         // Node row k sits at v_nodes[k]; its radiance is texel row k-1, clamped.
         let j = k.saturating_sub(1).min(h - 1);
-        let factor = mapping.area_factor(v_nodes[k]) as f32;
+        let factor = factors[k] as f32;
         let row = image.row(j);
         for (o, t) in out[1..=w].iter_mut().zip(row) {
             *o = luminance(*t) * factor;
@@ -364,6 +374,38 @@ pub(crate) fn bilinear_nodes(image: &EnvImage, mapping: Mapping) -> (Vec<f32>, V
         out[w + 1] = right;
     });
     (values, u_nodes, v_nodes)
+}
+
+/// Whether the bilinear density of an `h`-row map read with `lookup` has the
+/// node-row layout in v ([`bilinear_nodes`]).
+pub(crate) fn node_rows(h: usize, lookup: Lookup) -> bool {
+    lookup == Lookup::Node && h >= 2
+}
+
+/// The area factor `J` of each node row of the bilinear density at `v_nodes`:
+/// `J(v)` at the node, except on the node-row layout's pole rows (`v = 0`, `1`,
+/// and their copies), where `J = sin(π v)` is 0 while the lookup's radiance
+/// there is not: a zero factor would leave the density 0 on the whole first
+/// cell when the next row is black (and on the whole map for two rows). They
+/// take instead the mean of `J` over the half cell next to the pole,
+/// `(1 − cos(π Δ/2)) / (π Δ/2)` with `Δ = 1/(h − 1)` (`2/π` for two rows; about
+/// `π Δ/4`, a quarter of the next row's, for many): the density stays > 0
+/// wherever the radiance is, and close to `Y · J` near the pole.
+pub(crate) fn node_row_factors(v_nodes: &[f64], mapping: Mapping, node_rows: bool) -> Vec<f64> {
+    let n = v_nodes.len();
+    v_nodes
+        .iter()
+        .enumerate()
+        .map(|(k, &v)| {
+            let pole = k <= 1 || k + 2 >= n;
+            if node_rows && pole {
+                let half = 0.5 * PI * (v_nodes[2] - v_nodes[1]);
+                (1.0 - half.cos()) / half
+            } else {
+                mapping.area_factor(v)
+            }
+        })
+        .collect()
 }
 
 /// Row `j` of the texel-grid importance of DESIGN.md §4 step 1, written to `out`;

@@ -104,7 +104,8 @@ impl Fine {
         let cells = match light.options().density {
             Density::PiecewiseConstant => Cells::Texels,
             Density::PiecewiseBilinear => {
-                let (values, u_nodes, v_nodes) = bilinear_nodes(light.image(), light.mapping());
+                let (values, u_nodes, v_nodes) =
+                    bilinear_nodes(light.image(), light.mapping(), light.options().lookup);
                 Cells::Bilinear {
                     values,
                     u_nodes,
@@ -356,6 +357,13 @@ impl Fine {
     fn cell_of(&self, axis: usize, x: f32) -> usize {
         match self.cells {
             Cells::Texels => cell_index(x, self.size[axis]),
+            // Nodes at 0, j/(n - 1), 1 along v (the node lookup's rows, whose
+            // first node repeats 0): cell k ≥ 1 is [(k - 1)/(n - 1), k/(n - 1)),
+            // the end cells of zero width are never the one found.
+            Cells::Bilinear { ref v_nodes, .. } if axis == 1 && v_nodes[1] == 0.0 => {
+                let rows = self.size[1] - 1;
+                1 + ((x as f64 * rows as f64).max(0.0) as usize).min(rows - 1)
+            }
             // Nodes at 0, (i + ½)/n, 1: cell i is [(i - ½)/n, (i + ½)/n).
             Cells::Bilinear { .. } => {
                 let n = self.size[axis];
