@@ -173,7 +173,8 @@ enum envlight_lookup
   ENVLIGHT_LOOKUP_NEAREST = 1,
   /**
    * Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
-   * as Mitsuba 3's envmap reads a map (equirectangular, piecewise-constant density).
+   * as Mitsuba 3's envmap reads a map (equirectangular; the piecewise-bilinear
+   * density puts its nodes on those rows).
    */
   ENVLIGHT_LOOKUP_NODE = 2,
 };

@@ -94,7 +94,8 @@ pub enum LookupArg {
     /// sampled.
     Bilinear,
     /// Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
-    /// as Mitsuba 3's envmap reads a map; lat-long maps, piecewise-constant density.
+    /// as Mitsuba 3's envmap reads a map; lat-long maps (the piecewise-bilinear
+    /// density puts its nodes on those rows).
     Node,
 }
 

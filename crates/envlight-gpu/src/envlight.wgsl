@@ -57,7 +57,7 @@ struct Params {
     alias_inv_integral: f32,
     bilinear_values: u32,
     tables_words: u32,
-    reserved0: u32,
+    bilinear_v_nodes: u32,
     reserved1: u32,
     reserved: array<vec4<u32>, 3>,
 }
@@ -104,6 +104,7 @@ const DENSITY_BILINEAR: u32 = 1u;
 const MAPPING_EQUAL_AREA: u32 = 1u;
 const LOOKUP_BILINEAR: u32 = 1u;
 const LOOKUP_NODE: u32 = 2u;
+const V_NODES_NODE_ROWS: u32 = 1u;
 const RADIANCE_F16: u32 = 1u;
 
 // (sin πx, cos πx) to about 2 f32 ulps, with no rounding of π x (full relative
@@ -526,6 +527,40 @@ fn patch_of(x: f32, n: u32) -> u32 {
     return min(u32(x * f32(n) + 0.5), n);
 }
 
+// Along v the nodes are the texel centres as along u, or (`bilinear_v_nodes` 1,
+// the node lookup) the rows from pole to pole: 0, 0, (k − 1)/(h − 1) for
+// 1 ≤ k ≤ h, 1, whose end patches have zero width and are never found.
+fn v_node(k: u32, h: u32) -> f32 {
+    if params.bilinear_v_nodes != V_NODES_NODE_ROWS {
+        return node(k, h);
+    }
+    if k == 0u {
+        return 0.0;
+    }
+    if k > h {
+        return 1.0;
+    }
+    return f32(k - 1u) / f32(h - 1u);
+}
+
+fn v_patch_width(k: u32, h: u32) -> f32 {
+    if params.bilinear_v_nodes != V_NODES_NODE_ROWS {
+        return patch_width(k, h);
+    }
+    if k == 0u || k == h {
+        return 0.0;
+    }
+    return 1.0 / f32(h - 1u);
+}
+
+// The patch holding v ∈ [0, 1]: 1 + min(⌊v (h − 1)⌋, h − 2) on the node rows.
+fn v_patch_of(v: f32, h: u32) -> u32 {
+    if params.bilinear_v_nodes != V_NODES_NODE_ROWS {
+        return patch_of(v, h);
+    }
+    return 1u + min(u32(v * f32(h - 1u)), h - 2u);
+}
+
 // The corners (f00, f10, f01, f11) of patch (i, k).
 fn corners(i: u32, k: u32) -> vec4<f32> {
     let mu = params.image_width + 2u;
@@ -560,7 +595,7 @@ fn sample_bilinear(xi: vec2<f32>) -> PlanarSample {
     let w = params.image_width;
     let h = params.image_height;
     let u = mix(node(i, w), node(i + 1u, w), x);
-    let v = mix(node(k, h), node(k + 1u, h), y);
+    let v = mix(v_node(k, h), v_node(k + 1u, h), y);
     let uv = vec2<f32>(min(u, ONE_MINUS_EPSILON), min(v, ONE_MINUS_EPSILON));
     return PlanarSample(uv, c.cell);
 }
@@ -572,14 +607,14 @@ fn pdf_bilinear(uv: vec2<f32>) -> f32 {
     let u = unit_closed(uv.x);
     let v = unit_closed(uv.y);
     let i = patch_of(u, w);
-    let k = patch_of(v, h);
+    let k = v_patch_of(v, h);
     let f = corners(i, k);
     let left = max(u - node(i, w), 0.0);
     let right = max(node(i + 1u, w) - u, 0.0);
-    let top = max(v - node(k, h), 0.0);
-    let bottom = max(node(k + 1u, h) - v, 0.0);
+    let top = max(v - v_node(k, h), 0.0);
+    let bottom = max(v_node(k + 1u, h) - v, 0.0);
     let weighted = bottom * (right * f.x + left * f.y) + top * (right * f.z + left * f.w);
-    let area = patch_width(i, w) * patch_width(k, h);
+    let area = patch_width(i, w) * v_patch_width(k, h);
     let denominator = area * area * (f.x + f.y + f.z + f.w);
     if !(denominator > 0.0) {
         return 0.0;
@@ -865,7 +900,7 @@ fn cell_of(uv: vec2<f32>) -> vec2<u32> {
     if params.density == DENSITY_BILINEAR {
         return vec2<u32>(
             patch_of(unit_closed(uv.x), params.image_width),
-            patch_of(unit_closed(uv.y), params.image_height),
+            v_patch_of(unit_closed(uv.y), params.image_height),
         );
     }
     return vec2<u32>(cell_index(uv.x, params.table_width), cell_index(uv.y, params.table_height));
@@ -878,7 +913,7 @@ fn centre_of(cell: vec2<u32>) -> vec2<f32> {
         let h = params.image_height;
         return vec2<f32>(
             0.5 * (node(cell.x, w) + node(cell.x + 1u, w)),
-            0.5 * (node(cell.y, h) + node(cell.y + 1u, h)),
+            0.5 * (v_node(cell.y, h) + v_node(cell.y + 1u, h)),
         );
     }
     return (vec2<f32>(cell) + 0.5) / vec2<f32>(f32(params.table_width), f32(params.table_height));

@@ -90,10 +90,14 @@ fn ported() -> Vec<(String, LightOptions)> {
             }
         }
     }
-    // The node lookup: lat-long maps, piecewise-constant density.
-    for sampler in [Sampler::Inversion, Sampler::Alias] {
-        let name = format!("{} node", sampler.name());
-        let density = Density::PiecewiseConstant;
+    // The node lookup: lat-long maps, either density (the bilinear one's nodes on
+    // the rows, pole to pole).
+    for (sampler, density) in [
+        (Sampler::Inversion, Density::PiecewiseConstant),
+        (Sampler::Alias, Density::PiecewiseConstant),
+        (Sampler::Inversion, Density::PiecewiseBilinear),
+    ] {
+        let name = format!("{} {} node", sampler.name(), density.name());
         out.push((
             name,
             options(sampler, density, Mapping::Equirectangular, Lookup::Node),
