@@ -32,6 +32,7 @@ _W = {
     "integral_luminance": 37, "marginal_cdf": 38, "marginal_guide": 39,
     "marginal_guide_shift": 40, "conditional_cdf": 41, "conditional_guide": 42,
     "conditional_guide_bits": 43, "bilinear_values": 48, "tables_words": 49,
+    "bilinear_v_nodes": 50,
 }
 _F32_WORDS = {"scale", "integral_luminance"}
 
@@ -40,6 +41,7 @@ DENSITY_CONSTANT, DENSITY_BILINEAR = 0, 1
 MAPPING_EQUIRECT, MAPPING_EQUAL_AREA = 0, 1
 LOOKUP_NEAREST, LOOKUP_BILINEAR, LOOKUP_NODE = 0, 1, 2
 RADIANCE_F32, RADIANCE_F16 = 0, 1
+V_NODES_TEXEL_CENTRES, V_NODES_NODE_ROWS = 0, 1
 
 # dω / du dv of the equirectangular map over sin θ (2π²), and of the equal-area square (4π).
 EQUIRECT_JACOBIAN = 19.7392088021787172
@@ -87,6 +89,11 @@ class TableLight:
             raise ValueError('sampler "alias" is not ported to Dr.Jit; use sampler="inversion"')
         if p["lookup"] not in (LOOKUP_NEAREST, LOOKUP_BILINEAR, LOOKUP_NODE):
             raise ValueError(f"unknown lookup {p['lookup']} in the GPU tables")
+        if p["bilinear_v_nodes"] not in (V_NODES_TEXEL_CENTRES, V_NODES_NODE_ROWS):
+            raise ValueError(f"unknown bilinear_v_nodes {p['bilinear_v_nodes']} in the GPU tables")
+        # Along v, the bilinear density's nodes are the texel centres or (the node
+        # lookup's) the rows from pole to pole; a constant of the trace.
+        self.node_rows = p["bilinear_v_nodes"] == V_NODES_NODE_ROWS
         self.p = p
         self.mi = mi
         self.jit = dr.is_jit_v(mi.Float)
@@ -317,6 +324,26 @@ class TableLight:
     def _patch_of(self, x, n):
         return dr.minimum(self._u(x * float(n) + 0.5), n)
 
+    def _v_node(self, k, h):
+        """Node k along v: `_node`, or on the node rows 0, (k − 1)/(h − 1) for
+        1 ≤ k ≤ h, 1 (nodes 0 and 1 repeat the poles: zero-width end patches)."""
+        if not self.node_rows:
+            return self._node(k, h)
+        inner = (self._f(k) - 1.0) / float(h - 1)
+        return dr.select(k == 0, 0.0, dr.select(k > h, 1.0, inner))
+
+    def _v_patch_width(self, k, h):
+        if not self.node_rows:
+            return self._patch_width(k, h)
+        return dr.select((k == 0) | (k == h), 0.0, 1.0 / (h - 1))
+
+    def _v_patch_of(self, v, h):
+        """The patch holding v ∈ [0, 1]: `_patch_of`, or on the node rows
+        1 + min(⌊v (h − 1)⌋, h − 2), never a zero-width end patch."""
+        if not self.node_rows:
+            return self._patch_of(v, h)
+        return 1 + dr.minimum(self._u(v * float(h - 1)), h - 2)
+
     def _corners(self, i, k):
         mu = self.p["image_width"] + 2
         top = k * mu + i
@@ -343,7 +370,7 @@ class TableLight:
         x = self._sample_linear(ou, dr.lerp(f00, f01, y), dr.lerp(f10, f11, y))
         w, h = self.p["image_width"], self.p["image_height"]
         u = dr.lerp(self._node(i, w), self._node(i + 1, w), x)
-        v = dr.lerp(self._node(k, h), self._node(k + 1, h), y)
+        v = dr.lerp(self._v_node(k, h), self._v_node(k + 1, h), y)
         return dr.minimum(u, ONE_MINUS_EPSILON), dr.minimum(v, ONE_MINUS_EPSILON), i, k
 
     def _pdf_bilinear(self, u, v):
@@ -351,14 +378,14 @@ class TableLight:
         u = self._unit_closed(u)
         v = self._unit_closed(v)
         i = self._patch_of(u, w)
-        k = self._patch_of(v, h)
+        k = self._v_patch_of(v, h)
         f00, f10, f01, f11 = self._corners(i, k)
         left = dr.maximum(u - self._node(i, w), 0.0)
         right = dr.maximum(self._node(i + 1, w) - u, 0.0)
-        top = dr.maximum(v - self._node(k, h), 0.0)
-        bottom = dr.maximum(self._node(k + 1, h) - v, 0.0)
+        top = dr.maximum(v - self._v_node(k, h), 0.0)
+        bottom = dr.maximum(self._v_node(k + 1, h) - v, 0.0)
         weighted = bottom * (right * f00 + left * f10) + top * (right * f01 + left * f11)
-        area = self._patch_width(i, w) * self._patch_width(k, h)
+        area = self._patch_width(i, w) * self._v_patch_width(k, h)
         denominator = area * area * (f00 + f10 + f01 + f11)
         ok = denominator > 0.0
         wu, wv = self._cell_widths(i, k)
@@ -526,7 +553,7 @@ class TableLight:
         p = self.p
         if p["density"] == DENSITY_BILINEAR:
             return (self._patch_of(self._unit_closed(u), p["image_width"]),
-                    self._patch_of(self._unit_closed(v), p["image_height"]))
+                    self._v_patch_of(self._unit_closed(v), p["image_height"]))
         return self._cell_index(u, p["table_width"]), self._cell_index(v, p["table_height"])
 
     def _centre_of(self, iu, iv):
@@ -534,7 +561,7 @@ class TableLight:
         if p["density"] == DENSITY_BILINEAR:
             w, h = p["image_width"], p["image_height"]
             return (0.5 * (self._node(iu, w) + self._node(iu + 1, w)),
-                    0.5 * (self._node(iv, h) + self._node(iv + 1, h)))
+                    0.5 * (self._v_node(iv, h) + self._v_node(iv + 1, h)))
         return ((self._f(iu) + 0.5) / float(p["table_width"]), (self._f(iv) + 0.5) / float(p["table_height"]))
 
     def settle(self, u, v, iu, iv, cu, cv, cell_of, outer=None):

@@ -124,6 +124,8 @@ CONFIGS = [
     {"table_width": 16},
     {"lookup": "node"},
     {"lookup": "node", "rotate": 80.0},
+    {"lookup": "node", "density": "piecewise-bilinear"},
+    {"lookup": "node", "density": "piecewise-bilinear", "rotate": 80.0},
 ]
 
 
@@ -529,7 +531,6 @@ def test_scalar_render_agrees_with_llvm(sunrise):
         ({}, 'a "filename" \\(or "bitmap"\\) parameter is required'),
         ({"filename": "x.exr", "bitmap": "bitmap"}, 'cannot specify both "bitmap" and "filename"'),
         ({"bitmap": "bitmap", "sampling": "bsdf"}, 'parameter "sampling" must be one of "light"'),
-        ({"bitmap": "bitmap", "density": "piecewise-bilinear"}, "node lookup needs the piecewise-constant density"),
         ({"bitmap": "bitmap", "sampler": "alias"}, 'parameter "sampler" must be one of "inversion"'),
         ({"bitmap": "bitmap", "density": "smooth"}, 'parameter "density"'),
         ({"bitmap": "bitmap", "scale": -1.0}, '"scale" must be a finite number >= 0'),

@@ -11,9 +11,10 @@
 //!    lookups need no filter.
 //! 2. a 2D sampler over `f` ([`Sampler`]).
 //!
-//! The piecewise-bilinear density instead puts `Y · J` at the texel centres (the
-//! nodes of the bilinear reconstruction) and samples the bilinear interpolation of
-//! those values, so `L / p` is nearly constant.
+//! The piecewise-bilinear density instead puts `Y · J` at the nodes of the
+//! lookup's reconstruction (the texel centres; for [`Lookup::Node`], the rows from
+//! pole to pole along v) and samples the bilinear interpolation of those values,
+//! so `L / p` is nearly constant.
 //!
 //! Sampling maps the image point `(u, v)` to a direction and converts the density to
 //! solid angle: `p(ω) = p(u, v) / (dω / du dv)`, with `dω / du dv = 2π² sin θ`
@@ -67,8 +68,11 @@ pub enum Density {
     /// Constant over each texel (the seed's): `f[j][i]` as in the module docs.
     #[default]
     PiecewiseConstant,
-    /// Bilinear between texel centres, proportional to the bilinear radiance
-    /// reconstruction times the mapping's area factor at the nodes. Sampled by
+    /// Bilinear between the lookup's nodes (texel centres; along v for
+    /// [`Lookup::Node`], its rows from pole to pole), proportional to the bilinear
+    /// radiance reconstruction times the mapping's area factor at the nodes (at
+    /// the node lookup's pole rows, where that factor is 0, its mean over the half
+    /// row next to the pole, so the density covers the radiance). Sampled by
     /// inversion only.
     PiecewiseBilinear,
 }
