@@ -95,12 +95,24 @@ impl<'a> Integrator<'a> {
         strategy: Strategy,
         max_depth: u32,
     ) -> Self {
+        Self::with_product_options(scene, light, strategy, max_depth, ProductOptions::default())
+    }
+
+    /// [`Self::new`] with the product sampler built with `product`.
+    pub fn with_product_options(
+        scene: &'a Scene,
+        light: &'a EnvironmentLight,
+        strategy: Strategy,
+        max_depth: u32,
+        product: ProductOptions,
+    ) -> Self {
+        let options = product;
         // `mis-product` samples metals from the compensated light too.
         let compensated = matches!(strategy, Strategy::MisCompensated | Strategy::MisProduct)
             .then(|| CompensatedLight::new(light));
         let product = strategy
             .uses_product()
-            .then(|| ProductSampler::new(Arc::new(light.clone()), ProductOptions::default()));
+            .then(|| ProductSampler::new(Arc::new(light.clone()), options));
         let portal = (strategy.uses_portals() && !scene.portals.is_empty()).then(|| {
             let quads: Vec<Portal> = scene
                 .portals
@@ -264,7 +276,11 @@ impl<'a> Integrator<'a> {
             // misses, at a light sample's cost. Product samples at metals won at
             // equal samples but cost 30% more per sample and lost at equal time
             // (BENCHMARKS.md, "Metals in mis-product").
-            let light_here = self.strategy == Strategy::MisProduct && bsdf.is_conductor();
+            // (With the on-the-fly product, measured against the tables, metals take
+            // product samples: its glossy weights carry the cosine.)
+            let on_the_fly = self.product.as_ref().is_some_and(|p| p.is_on_the_fly());
+            let light_here =
+                self.strategy == Strategy::MisProduct && bsdf.is_conductor() && !on_the_fly;
             if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
                 point.set_factor(&bsdf.product_factor(normal, -ray.direction));
             }

@@ -26,6 +26,9 @@ pub struct RenderSettings {
     pub strategy: Strategy,
     /// Seed of the random streams.
     pub seed: u64,
+    /// How the product strategies' sampler is built (the library's defaults unless
+    /// a measurement asks otherwise).
+    pub product: envlight::ProductOptions,
 }
 
 impl Default for RenderSettings {
@@ -37,6 +40,7 @@ impl Default for RenderSettings {
             max_depth: 8,
             strategy: Strategy::Mis,
             seed: 0,
+            product: envlight::ProductOptions::default(),
         }
     }
 }
@@ -116,7 +120,13 @@ pub fn render_with_error(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Rendered {
-    let integrator = Integrator::new(scene, light, settings.strategy, settings.max_depth);
+    let integrator = Integrator::with_product_options(
+        scene,
+        light,
+        settings.strategy,
+        settings.max_depth,
+        settings.product,
+    );
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let start = Instant::now();
     let rows = settings.height as u64;
@@ -147,7 +157,13 @@ pub fn render_for_time(
     seconds: f64,
     progress: &dyn Progress,
 ) -> Rendered {
-    let integrator = Integrator::new(scene, light, settings.strategy, settings.max_depth);
+    let integrator = Integrator::with_product_options(
+        scene,
+        light,
+        settings.strategy,
+        settings.max_depth,
+        settings.product,
+    );
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let budget = Duration::from_secs_f64(seconds.max(0.0));
     let budget_ms = budget.as_millis() as u64;

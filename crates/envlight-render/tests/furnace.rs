@@ -75,6 +75,7 @@ fn white_furnace_every_strategy() {
             max_depth: 5,
             strategy,
             seed: 11,
+            ..Default::default()
         };
         let r = render_with_error(&scene, &light, &settings, &NoProgress);
         let expected = FURNACE_ALBEDO as f64;

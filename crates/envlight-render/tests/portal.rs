@@ -134,6 +134,7 @@ fn strategies_agree_on_the_room() {
             max_depth: 4,
             strategy,
             seed: 8,
+            ..Default::default()
         };
         let r = render_with_error(&scene, &light, &settings, &NoProgress);
         let (mean, se) = common::image_mean_and_error(&r);
@@ -169,6 +170,7 @@ fn portal_renders_are_the_same_for_any_thread_count() {
             max_depth: 4,
             strategy,
             seed: 3,
+            ..Default::default()
         };
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()

@@ -68,6 +68,7 @@ fn product_strategies_agree_with_mis_on_diffuse() {
             max_depth: 5,
             strategy,
             seed,
+            ..Default::default()
         };
         render_with_error(&scene, &light, &settings, &NoProgress)
     };

@@ -54,6 +54,7 @@ fn same_image_for_any_thread_count() {
             max_depth: 6,
             strategy,
             seed: 42,
+            ..Default::default()
         };
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
@@ -93,6 +94,7 @@ fn time_budget_render_equals_sample_count_render() {
         max_depth: 4,
         strategy: Strategy::Mis,
         seed: 1,
+        ..Default::default()
     };
     // A long budget stops at the cap of 5 samples; no budget at all still takes one.
     let timed = render_for_time(&scene, &light, &settings, 60.0, &NoProgress);
@@ -119,6 +121,7 @@ fn strategies_agree_on_balls() {
             max_depth: 6,
             strategy,
             seed: 5,
+            ..Default::default()
         };
         let r = render_with_error(&scene, &light, &settings, &NoProgress);
         let (mean, se) = common::image_mean_and_error(&r);

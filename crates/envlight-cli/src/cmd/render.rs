@@ -116,6 +116,16 @@ pub struct RenderArgs {
     #[arg(long, value_name = "SECONDS", requires = "compare")]
     equal_time: Option<f64>,
 
+    /// The product strategies' patch grid, e.g. `16x8` (for measurements; default:
+    /// the library's).
+    #[arg(long, value_name = "PWxPH", value_parser = parse_patches, hide = true)]
+    product_patches: Option<[usize; 2]>,
+
+    /// The product strategies weight every patch at each shading point, without
+    /// tables (an on-the-fly product, for measurements against the tables).
+    #[arg(long, hide = true)]
+    product_on_the_fly: bool,
+
     /// With --compare, the reference image (.exr or .pfm of the same size) instead of
     /// rendering one.
     #[arg(long, value_name = "FILE", requires = "compare")]
@@ -224,6 +234,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         max_depth: args.max_depth,
         strategy: args.strategy,
         seed: args.seed,
+        product: envlight::ProductOptions {
+            patches: args.product_patches,
+            on_the_fly: args.product_on_the_fly,
+            ..Default::default()
+        },
     };
     let bars = Bars::new();
 
@@ -270,4 +285,16 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `PWxPH` as two positive counts.
+fn parse_patches(text: &str) -> Result<[usize; 2], String> {
+    let parse = |t: &str| t.trim().parse::<usize>().ok().filter(|&n| n > 0);
+    match text.split_once(['x', 'X']) {
+        Some((a, b)) => match (parse(a), parse(b)) {
+            (Some(a), Some(b)) => Ok([a, b]),
+            _ => Err(format!("expected PWxPH with positive counts, got {text:?}")),
+        },
+        None => Err(format!("expected PWxPH, got {text:?}")),
+    }
 }

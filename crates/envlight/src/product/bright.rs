@@ -48,7 +48,7 @@ pub(super) struct Bright {
     /// Brightest first.
     items: Vec<Item>,
     /// Each patch's place in `items`, or [`Bright::NONE`].
-    of_patch: Vec<u8>,
+    of_patch: Vec<u16>,
 }
 
 /// The factor a shading point weights the bright patches by, in the light frame.
@@ -66,27 +66,37 @@ pub(super) enum Target {
 }
 
 impl Bright {
-    const NONE: u8 = u8::MAX;
+    const NONE: u16 = u16::MAX;
 
     /// The patches of `fine` holding at least [`BRIGHT_SHARE`] of its light
     /// within [`BRIGHT_MAX_HALF_ANGLE`], at most [`MAX_BRIGHT`], brightest first
-    /// (ties by index).
-    pub fn new(fine: &Fine) -> Self {
+    /// (ties by index). With `every`, every lit patch instead (the on-the-fly
+    /// product of [`ProductOptions::on_the_fly`](super::ProductOptions::on_the_fly)).
+    pub fn new(fine: &Fine, every: bool) -> Self {
         let mut order: Vec<usize> = (0..fine.power.len())
             .filter(|&k| {
-                fine.power[k] >= BRIGHT_SHARE
+                let lit = fine.power[k] > 0.0 && fine.regions[k].is_some();
+                let bright = fine.power[k] >= BRIGHT_SHARE
                     && fine.regions[k]
-                        .is_some_and(|r| r.cone.cos_half >= BRIGHT_MAX_HALF_ANGLE.cos())
+                        .is_some_and(|r| r.cone.cos_half >= BRIGHT_MAX_HALF_ANGLE.cos());
+                if every {
+                    lit
+                } else {
+                    bright
+                }
             })
             .collect();
         order.sort_by(|&a, &b| fine.power[b].total_cmp(&fine.power[a]).then(a.cmp(&b)));
-        order.truncate(MAX_BRIGHT);
+        if !every {
+            order.truncate(MAX_BRIGHT);
+        }
+        assert!(order.len() < Self::NONE as usize, "at most 65535 patches");
         let mut of_patch = vec![Self::NONE; fine.power.len()];
         let items = order
             .iter()
             .enumerate()
             .map(|(b, &k)| {
-                of_patch[k] = b as u8;
+                of_patch[k] = b as u16;
                 Item {
                     patch: k as u32,
                     power: fine.power[k],
@@ -124,7 +134,7 @@ impl Bright {
     /// Each bright patch's weight for `target` into `out` (the first
     /// [`Self::len`] entries; the others are left as they are), and their sum.
     #[inline]
-    pub fn weights(&self, target: &Target, bound: PatchBound, out: &mut [f64; MAX_BRIGHT]) -> f64 {
+    pub fn weights(&self, target: &Target, bound: PatchBound, out: &mut [f64]) -> f64 {
         let mut total = 0.0;
         for (o, item) in out.iter_mut().zip(&self.items) {
             let (value, upper) = match target {
@@ -182,12 +192,16 @@ impl Bright {
             .collect()
     }
 
-    /// Per patch, its index among the bright ones or 255.
-    pub fn of_patch(&self) -> &[u8] {
-        &self.of_patch
+    /// Per patch, its index among the bright ones (at most 16 of them) or 255.
+    pub fn of_patch_u8(&self) -> Vec<u8> {
+        assert!(self.items.len() <= MAX_BRIGHT, "the default bright patches");
+        self.of_patch
+            .iter()
+            .map(|&b| if b == Self::NONE { u8::MAX } else { b as u8 })
+            .collect()
     }
 
     pub fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<Item>() * self.items.len() + self.of_patch.len()
+        std::mem::size_of::<Item>() * self.items.len() + 2 * self.of_patch.len()
     }
 }

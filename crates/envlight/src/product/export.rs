@@ -124,6 +124,6 @@ impl Tables {
 impl Bright {
     pub(super) fn export_into(&self, out: &mut ProductTables) {
         out.bright = self.exported();
-        out.bright_of_patch = self.of_patch().to_vec();
+        out.bright_of_patch = self.of_patch_u8();
     }
 }

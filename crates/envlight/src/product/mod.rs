@@ -86,6 +86,14 @@ pub struct ProductOptions {
     /// roughness's tables (the narrower ones use 1.5 and 2 times as many). `None`
     /// for [`ProductOptions::DEFAULT_LOBE_GRID`].
     pub lobe_grid: Option<usize>,
+    /// Every lit patch weighted at each shading point by the factor itself (as the
+    /// bright patches are), none through the tables: an on-the-fly product over the
+    /// patch grid in the manner of Clarberg and Akenine-Möller (2008), with the
+    /// light's own density within a patch. Each shading point costs a bound of the
+    /// factor per patch and a sample a scan of the patches: for measurements
+    /// against the tables (BENCHMARKS.md), not for rendering.
+    #[doc(hidden)]
+    pub on_the_fly: bool,
     /// How a patch's weight bounds the factor: always [`PatchBound::Cone`] except
     /// in tests that prove the verification harness rejects the alternative.
     #[doc(hidden)]
@@ -204,6 +212,7 @@ pub struct ProductSampler {
     /// Cells per side of the lobes' grids.
     lobe_grid: usize,
     bound: PatchBound,
+    on_the_fly: bool,
 }
 
 impl ProductSampler {
@@ -220,7 +229,7 @@ impl ProductSampler {
         let lobe_grid = options
             .lobe_grid
             .unwrap_or(ProductOptions::DEFAULT_LOBE_GRID);
-        let bright = Bright::new(&fine);
+        let bright = Bright::new(&fine, options.on_the_fly);
         let cosine = Tables::new(
             &fine,
             normal_grid,
@@ -236,6 +245,7 @@ impl ProductSampler {
             lobes: Default::default(),
             lobe_grid,
             bound: options.bound,
+            on_the_fly: options.on_the_fly,
         }
     }
 
@@ -260,6 +270,12 @@ impl ProductSampler {
                 )
             }),
         }
+    }
+
+    /// Whether it was built with [`ProductOptions::on_the_fly`].
+    #[doc(hidden)]
+    pub fn is_on_the_fly(&self) -> bool {
+        self.on_the_fly
     }
 
     /// The light sampled.
@@ -350,7 +366,11 @@ impl ProductSampler {
             set: 0,
             mix: Mix::default(),
             tables_share: 0.0,
-            bright: [0.0; MAX_BRIGHT],
+            bright: if self.bright.len() <= MAX_BRIGHT {
+                Weights::Inline([0.0; MAX_BRIGHT])
+            } else {
+                Weights::Heap(vec![0.0; self.bright.len()])
+            },
             anything: false,
         }
     }
@@ -443,6 +463,32 @@ impl ProductSampler {
     }
 }
 
+/// The bright patches' weights at a shading point: on the stack for the default
+/// sampler's few, on the heap for the on-the-fly product's every patch.
+#[derive(Debug, Clone)]
+enum Weights {
+    Inline([f64; MAX_BRIGHT]),
+    Heap(Vec<f64>),
+}
+
+impl AsRef<[f64]> for Weights {
+    fn as_ref(&self) -> &[f64] {
+        match self {
+            Weights::Inline(a) => a,
+            Weights::Heap(v) => v,
+        }
+    }
+}
+
+impl AsMut<[f64]> for Weights {
+    fn as_mut(&mut self) -> &mut [f64] {
+        match self {
+            Weights::Inline(a) => a,
+            Weights::Heap(v) => v,
+        }
+    }
+}
+
 /// The sampling state at one shading point: the factor and the tables it mixes.
 /// Made by [`ProductSampler::at`]; `O(1)`.
 #[derive(Debug, Clone)]
@@ -460,7 +506,7 @@ pub struct ShadingPoint<'a> {
     /// bright patches).
     tables_share: f64,
     /// Each bright patch's probability.
-    bright: [f64; MAX_BRIGHT],
+    bright: Weights,
     /// Whether anything can be sampled.
     anything: bool,
 }
@@ -527,7 +573,7 @@ impl ShadingPoint<'_> {
         };
         let bright = sampler
             .bright
-            .weights(&target, sampler.bound, &mut self.bright);
+            .weights(&target, sampler.bound, self.bright.as_mut());
         let total = tables + bright;
         if !(total > 0.0 && total.is_finite()) {
             self.mix = Mix::default();
@@ -545,7 +591,7 @@ impl ShadingPoint<'_> {
         // component has weight, however far apart the components' totals are.
         let floor = |x: f64| if x > 0.0 { x.max(MIN_SHARE) } else { 0.0 };
         let inv_total = 1.0 / total;
-        let brights = &mut self.bright[..sampler.bright.len()];
+        let brights = &mut self.bright.as_mut()[..sampler.bright.len()];
         let mut sum = floor(tables * inv_total);
         for b in brights.iter_mut() {
             *b = floor(*b * inv_total);
@@ -584,7 +630,7 @@ impl ShadingPoint<'_> {
     #[inline]
     fn patch_probability(&self, k: usize) -> f64 {
         match self.sampler.bright.index(k) {
-            Some(b) => self.bright[b],
+            Some(b) => self.bright.as_ref()[b],
             None => self.tables_share * self.sampler.tables(self.set).probability(&self.mix, k),
         }
     }
@@ -629,7 +675,8 @@ impl ShadingPoint<'_> {
             // passes x, or the last with weight if rounding leaves x past them all.
             let bright = &sampler.bright;
             let (mut b, mut start, mut end) = (0, self.tables_share, self.tables_share);
-            for (c, &p) in self.bright[..bright.len()].iter().enumerate() {
+            let weights = self.bright.as_ref();
+            for (c, &p) in weights[..bright.len()].iter().enumerate() {
                 if p > 0.0 {
                     (b, start, end) = (c, end, end + p);
                     if x < end {
@@ -637,7 +684,7 @@ impl ShadingPoint<'_> {
                     }
                 }
             }
-            let x = ((x - start) / self.bright[b]).clamp(0.0, BELOW_ONE);
+            let x = ((x - start) / weights[b]).clamp(0.0, BELOW_ONE);
             (bright.patch(b), [x, clamp(xi[1])])
         };
         let light = &sampler.light;

@@ -324,7 +324,7 @@ fn mixed_tables_weight_every_patch_the_factor_sees() {
                 // A bright patch is weighted at the point itself, not in the tables.
                 if let Some(b) = sampler.bright.index(k) {
                     assert!(
-                        point.bright[b] > 0.0,
+                        point.bright.as_ref()[b] > 0.0,
                         "{}: {factor:?}: bright patch {k} has no weight",
                         case.name
                     );
@@ -400,6 +400,12 @@ fn bilinear_density_is_followed_within_patches() {
 #[test]
 fn pdf_of_sample_matches_sample_pdf() {
     for case in cases() {
+        check_pdf_of_samples(&case);
+    }
+}
+
+fn check_pdf_of_samples(case: &Case) {
+    {
         for (index, factor) in factors().iter().enumerate() {
             let point = case.sampler.at(factor);
             let mut drawn = 0;
@@ -434,8 +440,14 @@ fn pdf_of_sample_matches_sample_pdf() {
 /// follow once the light is rotated or equal-area.
 #[test]
 fn pdf_integrates_to_one() {
-    let (nu, nv) = (1024usize, 512usize);
     for case in cases() {
+        check_integral(&case);
+    }
+}
+
+fn check_integral(case: &Case) {
+    let (nu, nv) = (1024usize, 512usize);
+    {
         for factor in factors().iter().step_by(3) {
             let point = case.sampler.at(factor);
             let mut integral = 0.0f64;
@@ -805,7 +817,12 @@ fn exported_cosine_tables_are_consistent() {
         let [cw, ch] = t.cells.map(|x| x as usize);
         let nodes = (t.grid as usize + 1).pow(2);
         let patches = t.spans.len();
-        assert_eq!(patches, (t.patches[0] * t.patches[1]) as usize, "{}", c.name);
+        assert_eq!(
+            patches,
+            (t.patches[0] * t.patches[1]) as usize,
+            "{}",
+            c.name
+        );
         assert_eq!(t.cell_widths.len(), cw * ch, "{}", c.name);
         assert_eq!(t.cell_slots.len(), cw * ch, "{}", c.name);
         assert_eq!(t.table_widths.len(), patches * nodes, "{}", c.name);
@@ -852,12 +869,42 @@ fn exported_cosine_tables_are_consistent() {
             }
         }
         for (b, bright) in t.bright.iter().enumerate() {
-            assert_eq!(t.bright_of_patch[bright.patch as usize] as usize, b, "{}", c.name);
+            assert_eq!(
+                t.bright_of_patch[bright.patch as usize] as usize, b,
+                "{}",
+                c.name
+            );
         }
         let marked = t.bright_of_patch.iter().filter(|&&b| b != 255).count();
         assert_eq!(marked, t.bright.len(), "{}", c.name);
         let bilinear = c.sampler.density() == Density::PiecewiseBilinear;
         assert_eq!(t.density, c.sampler.density(), "{}", c.name);
         assert_eq!(!t.node_values.is_empty(), bilinear, "{}", c.name);
+    }
+}
+
+/// The on-the-fly product (every patch weighted at the shading point, for
+/// measurements against the tables) is a density too: it integrates to 1 and its
+/// pdf is its samples'.
+#[test]
+fn on_the_fly_product_is_a_density() {
+    // Sizes that divide check_integral's grid: the midpoint rule is then exact.
+    for (w, h, patches) in [(64, 32, [16, 8]), (64, 32, [64, 32])] {
+        let light =
+            EnvironmentLight::new(crate::builtin::sky(w, h), LightOptions::default()).unwrap();
+        let case = Case {
+            name: "on the fly",
+            sampler: ProductSampler::new(
+                Arc::new(light),
+                ProductOptions {
+                    patches: Some(patches),
+                    on_the_fly: true,
+                    ..Default::default()
+                },
+            ),
+        };
+        assert!(case.sampler.bright.len() > MAX_BRIGHT);
+        check_pdf_of_samples(&case);
+        check_integral(&case);
     }
 }
