@@ -54,6 +54,11 @@ class TableProduct:
         if (iw, ih) != (light.p["image_width"], light.p["image_height"]):
             raise ValueError("the product tables and the light's tables are of different maps")
         self.bilinear = tables["density"] == "piecewise-bilinear"
+        # The bilinear density's nodes along v: texel centres, or the node lookup's
+        # rows from pole to pole (a repeated first node), as the light's tables say.
+        self.node_rows = self.bilinear and light.node_rows
+        if self.bilinear and bool(np.asarray(tables["v_nodes"])[1] == 0.0) != self.node_rows:
+            raise ValueError("the product tables' nodes and the light's tables disagree")
         # Cells: w × h (texels, or (iw + 1) × (ih + 1) between the bilinear nodes).
         self.iw, self.ih = iw, ih
         self.w, self.h, self.pw = w, h, pw
@@ -307,6 +312,12 @@ class TableProduct:
             t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
             return dr.minimum(self._u(t), n)
 
+        if self.node_rows:
+            # The node lookup's rows along v (0, 0, j/(h − 1), 1, 1): cell k ≥ 1 is
+            # [(k − 1)/(h − 1), k/(h − 1)); the zero-width end cells are never found.
+            rows = self.ih - 1
+            t = dr.maximum(self._f64(v) * float(rows), 0.0)
+            return axis(u, self.iw), 1 + dr.minimum(self._u(t), rows - 1)
         return axis(u, self.iw), axis(v, self.ih)
 
     def _corners(self, i, j):

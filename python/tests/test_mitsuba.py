@@ -180,6 +180,8 @@ PRODUCT_CONFIGS = [
     {"mapping": "equal-area", "density": "piecewise-bilinear"},
     {"rotate": 37.0},
     {"lookup": "node"},
+    {"lookup": "node", "density": "piecewise-bilinear"},
+    {"lookup": "node", "density": "piecewise-bilinear", "rotate": 80.0},
 ]
 
 
