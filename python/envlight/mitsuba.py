@@ -17,16 +17,16 @@ Parameters, in Mitsuba's style:
   the map's frame is ``envmap``'s (y up);
 - ``sampling``: ``"light"`` (the default: density ∝ the map's importance) or
   ``"product"`` (density ∝ the map's importance × cos⁺ at the interaction's
-  geometric normal, ``it.n``, from envlight's product tables; an interaction
-  without a normal, in a medium, is sampled as ``"light"``). Product samples stay in the hemisphere of
-  ``it.n``: light reaching a surface from behind its geometric normal
-  (transmission, a two-sided material seen from the back) is left to BSDF
-  sampling, which Mitsuba's integrators weight against the emitter's by MIS;
+  geometric normal ``it.n``, from envlight's product tables; an interaction
+  without a normal, in a medium, is sampled as ``"light"``). Product samples
+  follow the hemisphere of ``it.n``: light reaching a surface from behind its
+  geometric normal (transmission, a two-sided material seen from the back) is left
+  to BSDF sampling, which Mitsuba's integrators weight against the emitter's by MIS;
 - envlight's options: ``sampler`` (``"inversion"``), ``density``
-  (``"piecewise-constant"``, ``"piecewise-bilinear"``), ``mapping``
-  (``"equirectangular"``, ``"equal-area"``) and ``lookup`` (``"node"``, the default,
-  ``envmap``'s convention: rows as nodes from pole to pole; ``"bilinear"``, texel
-  centres; ``"nearest"``).
+  (``"piecewise-bilinear"``, the default: bilinear over the lookup's nodes, as
+  ``envmap``'s warp is; ``"piecewise-constant"``), ``mapping`` (``"equirectangular"``,
+  ``"equal-area"``) and ``lookup`` (``"node"``, the default, ``envmap``'s convention:
+  rows as nodes from pole to pole; ``"bilinear"``, texel centres; ``"nearest"``).
 
 Every query (``sample_direction``, ``pdf_direction``, ``eval``, ``eval_direction``)
 is Dr.Jit code over the light's exported tables (docs/gpu-tables.md), so it traces
@@ -153,7 +153,7 @@ def _emitter_class(mi):
             self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
             self.options = {
                 "sampler": _choice(props, "sampler", SAMPLERS, "inversion"),
-                "density": _choice(props, "density", DENSITIES, "piecewise-constant"),
+                "density": _choice(props, "density", DENSITIES, "piecewise-bilinear"),
                 "mapping": _choice(props, "mapping", MAPPINGS, "equirectangular"),
                 "lookup": _choice(props, "lookup", LOOKUPS, "node"),
             }

@@ -260,7 +260,9 @@ def test_emitter_queries_equal_the_cpu_in_mitsubas_frame(variant):
     axis = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
     rotation = mi.ScalarTransform4f().rotate(axis.tolist(), 50.0)
     em = emitter(rgb, scale=3.0, to_world=rotation)
-    cpu = envlight.EnvironmentLight.from_array(rgb, frame="y-up", scale=3.0, lookup="node")
+    cpu = envlight.EnvironmentLight.from_array(
+        rgb, frame="y-up", scale=3.0, lookup="node", density="piecewise-bilinear"
+    )
     m = np.array(rotation.matrix, dtype=np.float64)[:3, :3]
     n = 2000 if variant != "scalar_rgb" else 100
     rng = np.random.default_rng(11)
@@ -312,7 +314,9 @@ def test_product_emitter_queries_equal_the_cpu_in_mitsubas_frame(variant):
     axis = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
     rotation = mi.ScalarTransform4f().rotate(axis.tolist(), 50.0)
     em = emitter(rgb, scale=3.0, to_world=rotation, sampling="product")
-    cpu = envlight.EnvironmentLight.from_array(rgb, frame="y-up", scale=3.0, lookup="node")
+    cpu = envlight.EnvironmentLight.from_array(
+        rgb, frame="y-up", scale=3.0, lookup="node", density="piecewise-bilinear"
+    )
     m = np.array(rotation.matrix, dtype=np.float64)[:3, :3]
     n = 2000 if variant != "scalar_rgb" else 100
     normals, u = normals_and_u(n, 23)
@@ -451,8 +455,8 @@ def pixel_variance(images):
 @pytest.mark.parametrize("integrator", ["path", "direct"])
 def test_product_image_agrees_with_envmap_and_has_lower_variance(sunrise, integrator):
     """sampling "product" renders envmap's image (mean within 3 SE, at most 5% of 8x8
-    blocks beyond 4 SE) with lower variance at equal samples than envlight's
-    light sampling."""
+    blocks beyond 4 SE) with lower variance at equal samples than envmap's and than
+    envlight's light sampling (diffuse spheres and ground, one rough plastic)."""
     llvm()
     rotation = mi.ScalarTransform4f().rotate([0, 1, 0], 70.0)
     seeds = range(12)
@@ -461,12 +465,12 @@ def test_product_image_agrees_with_envmap_and_has_lower_variance(sunrise, integr
     product = renders(scene(dict(base, sampling="product"), 16, integrator), [300 + s for s in seeds])
     light = renders(scene(base, 16, integrator), [400 + s for s in seeds])
     mean_z, beyond = agreement(product, envmap)
-    ratio = pixel_variance(product) / pixel_variance(light)
+    to_light = pixel_variance(product) / pixel_variance(light)
+    to_envmap = pixel_variance(product) / pixel_variance(envmap)
     print(f"{integrator}: product image mean {mean_z:+.2f} SE from envmap, {100 * beyond:.1f}% of blocks "
-          f"beyond 4 SE; pixel variance {ratio:.2f}x light's, {pixel_variance(product) / pixel_variance(envmap):.2f}x "
-          "envmap's")
+          f"beyond 4 SE; pixel variance {to_light:.2f}x light's, {to_envmap:.2f}x envmap's")
     assert abs(mean_z) < 3 and beyond <= 0.05
-    assert ratio < 0.95
+    assert to_light < 0.85 and to_envmap < 0.85
 
 
 def test_shadow_rays_reach_far_occluders(sunrise):
