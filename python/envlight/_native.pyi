@@ -127,6 +127,18 @@ class EnvironmentLight:
 
         Raises ValueError for the hierarchical sampler (not ported to the GPU), or
         radiance="f16" with a texel above 65504."""
+    def product_tables(self) -> Dict[str, Any]:
+        """The cosine product sampler's tables (docs/gpu-tables.md, "Product
+        tables") as numpy arrays, for a port of sample_product / pdf_product without
+        `outgoing` (envlight.mitsuba's sampling="product"): "density", "image"
+        (w, h), "cells" (cw, ch), "patches" (pw, ph), "grid"; uint32 "col_patch",
+        "row_patch", "cell_widths" (ch, cw), "cell_slots" (cw ch, 2), "spans"
+        (pw ph, 5), "table_slots" (nodes pw ph, 2), "table_widths" (pw ph, nodes);
+        "node_empty" uint8, "node_totals" float64 (nodes,); "bright" float64
+        (B, 20), "bright_of_patch" uint8 (pw ph,); "bound_share", "box_slack";
+        and for the piecewise-bilinear density "node_values" float32 (h + 2, w + 2),
+        "u_nodes", "v_nodes" float64. Directions in the light's z-up frame before
+        its rotation."""
     def sun(self) -> Optional[Dict[str, Any]]:
         """The map's sun (its brightest compact source, as a uniform disc), or None
         when it has none (radius > 5°, contrast < 20 or < 1% of the power).
