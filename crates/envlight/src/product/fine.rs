@@ -7,9 +7,11 @@
 //!   the texel-grid importance `Y(filtered) · J_j` of DESIGN.md §4 step 1 (never
 //!   MIS-compensated), constant over each;
 //! - for the piecewise-bilinear density, the `(w + 1) × (h + 1)` cells between
-//!   texel centres (half cells at the image's edges), over which the density is the
-//!   bilinear interpolation of `Y · J` at their corners (as in
-//!   [`crate::bilinear`]), weighted by its integral `M = Δu Δv Σ corners / 4`.
+//!   its nodes: texel centres (half cells at the image's edges) or, along v for the
+//!   node lookup, the rows from pole to pole (whose first and last cells have zero
+//!   width and are never drawn); over a cell the density is the bilinear
+//!   interpolation of `Y · J` at its corners (as in [`crate::bilinear`]), weighted
+//!   by its integral `M = Δu Δv Σ corners / 4`.
 //!
 //! A patch is a block of cells, stored patch by patch. Within patch `k` a cell is
 //! drawn from the patch's own fixed-point distribution over its cells by an exact
