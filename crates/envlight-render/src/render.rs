@@ -113,6 +113,21 @@ pub fn render(
     render_with_error(scene, light, settings, progress).image
 }
 
+/// The integrator `settings` asks for.
+fn integrator_for<'a>(
+    scene: &'a Scene,
+    light: &'a EnvironmentLight,
+    settings: &RenderSettings,
+) -> Integrator<'a> {
+    Integrator::with_product_options(
+        scene,
+        light,
+        settings.strategy,
+        settings.max_depth,
+        settings.product,
+    )
+}
+
 /// As [`render`], also returning the per-pixel standard error.
 pub fn render_with_error(
     scene: &Scene,
@@ -120,13 +135,7 @@ pub fn render_with_error(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Rendered {
-    let integrator = Integrator::with_product_options(
-        scene,
-        light,
-        settings.strategy,
-        settings.max_depth,
-        settings.product,
-    );
+    let integrator = integrator_for(scene, light, settings);
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let start = Instant::now();
     let rows = settings.height as u64;
@@ -157,13 +166,7 @@ pub fn render_for_time(
     seconds: f64,
     progress: &dyn Progress,
 ) -> Rendered {
-    let integrator = Integrator::with_product_options(
-        scene,
-        light,
-        settings.strategy,
-        settings.max_depth,
-        settings.product,
-    );
+    let integrator = integrator_for(scene, light, settings);
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let budget = Duration::from_secs_f64(seconds.max(0.0));
     let budget_ms = budget.as_millis() as u64;
