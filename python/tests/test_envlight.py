@@ -168,6 +168,38 @@ def test_product_sampling():
         light.sample_product(up, uniform_u(n), outgoing=wo, roughness=0.0)
 
 
+@pytest.mark.parametrize("density", ["piecewise-constant", "piecewise-bilinear"])
+def test_product_tables(density):
+    """product_tables(): the documented arrays, with shapes that fit each other, alias
+    tables over fixed-point widths (each lit patch's cells and each non-empty node's
+    patches sum to 2**32 - 1) and the bright patches where bright_of_patch says."""
+    t = envlight.EnvironmentLight.from_array(sky(), density=density).product_tables()
+    w, h = t["image"]
+    cw, ch = t["cells"]
+    assert t["density"] == density
+    assert (cw, ch) == ((w, h) if density == "piecewise-constant" else (w + 1, h + 1))
+    pw, ph = t["patches"]
+    nodes = (t["grid"] + 1) ** 2
+    assert t["cell_widths"].shape == (ch, cw) and t["cell_slots"].shape == (cw * ch, 2)
+    assert t["spans"].shape == (pw * ph, 5) and t["table_widths"].shape == (pw * ph, nodes)
+    assert t["table_slots"].shape == (nodes * pw * ph, 2) and t["node_totals"].shape == (nodes,)
+    assert t["col_patch"].shape == (cw,) and t["row_patch"].shape == (ch,)
+    one = 2**32 - 1
+    widths = t["cell_widths"].astype(np.uint64)
+    for x0, y0, cols, rows, _ in t["spans"]:
+        assert int(widths[y0 : y0 + rows, x0 : x0 + cols].sum()) in (0, one)
+    sums = t["table_widths"].astype(np.uint64).sum(axis=0)
+    assert set(np.unique(sums).tolist()) <= {0, one}
+    assert ((sums == 0) == t["node_empty"].astype(bool)).all()
+    bright = t["bright"]
+    assert bright.shape[1] == 20 and len(bright) >= 1  # the sky's sun
+    for b, row in enumerate(bright):
+        assert t["bright_of_patch"][int(row[0])] == b
+    assert (t["bright_of_patch"] != 255).sum() == len(bright)
+    if density == "piecewise-bilinear":
+        assert t["node_values"].shape == (h + 2, w + 2) and t["v_nodes"].shape == (h + 2,)
+
+
 def test_verify_passes():
     light = envlight.EnvironmentLight.from_array(sky())
     rows = light.verify(samples=20000)
