@@ -84,15 +84,18 @@ pub struct BilinearDistribution2D {
     integral: f64,
 }
 
-/// A [`BilinearDistribution2D`] on the texel-centre layout as tables (see
+/// A [`BilinearDistribution2D`] on a layout the light builds as tables (see
 /// [`BilinearDistribution2D::centred_tables`]): the node values (`mu` per row),
-/// the node positions, the cell counts `[w, h]` that locate a patch
-/// (`⌊x n + ½⌋`) and the patches' distribution.
+/// the node positions, the counts that locate a patch with one product (along u
+/// the texel count `w`, patch `⌊u w + ½⌋`; along v the texel count `h`, patch
+/// `⌊v h + ½⌋`, or with `node_rows` the row intervals `m = h − 1`, patch
+/// `1 + min(⌊v m⌋, m − 1)`) and the patches' distribution.
 pub(crate) struct CentredTables<'a> {
     pub values: &'a [f32],
     pub u_nodes: &'a [f64],
     pub v_nodes: &'a [f64],
     pub cells: [f64; 2],
+    pub node_rows: bool,
     pub patches: crate::distribution::CellTables<'a>,
 }
 
@@ -194,13 +197,6 @@ impl BilinearDistribution2D {
         &self.patches
     }
 
-    /// `[w, h]` when both axes are the texel-centre layout `0, (j + ½)/n, 1` of a
-    /// `w × h` image (the layout the light builds), else `None`.
-    pub(crate) fn texel_centre_cells(&self) -> Option<[usize; 2]> {
-        let (w, h) = (self.u.cells, self.v.cells);
-        (w > 0.0 && h > 0.0).then_some([w as usize, h as usize])
-    }
-
     /// `([w, h], node_rows)` when the nodes are one of the layouts the light
     /// builds: along u the texel centres of `w` texels, along v the texel centres
     /// of `h` texels (`node_rows` false) or the node rows `0, 0, j/(h - 1), 1, 1`
@@ -218,14 +214,16 @@ impl BilinearDistribution2D {
         }
     }
 
-    /// The tables of the texel-centre layout for kernels that gather them
-    /// themselves (the AVX-512 batch queries); `None` for other node layouts.
+    /// The tables of the layouts the light builds ([`Self::image_cells`]) for
+    /// kernels that gather them themselves (the AVX-512 batch queries); `None` for
+    /// other node layouts.
     pub(crate) fn centred_tables(&self) -> Option<CentredTables<'_>> {
-        self.texel_centre_cells().map(|_| CentredTables {
+        self.image_cells().map(|(_, node_rows)| CentredTables {
             values: &self.values,
             u_nodes: &self.u.nodes,
             v_nodes: &self.v.nodes,
-            cells: [self.u.cells, self.v.cells],
+            cells: [self.u.cells, self.v.locating_count()],
+            node_rows,
             patches: self.patches.cell_tables(),
         })
     }
@@ -312,12 +310,13 @@ impl BilinearDistribution2D {
         }
     }
 
-    /// The patches of `N` points `(u[j], v[j])` on the texel-centre layout
-    /// (`cells = [w, h]` from [`Self::texel_centre_cells`]), as loops the compiler
+    /// The patches of `N` points `(u[j], v[j])` on a layout the light builds
+    /// (`cells` and `node_rows` as in [`CentredTables`]), as loops the compiler
     /// vectorizes: the patches [`Self::locate`] finds, bit for bit.
     #[inline(always)]
     pub(crate) fn centred_patches<const N: usize>(
         cells: [f64; 2],
+        node_rows: bool,
         u: &[f32; N],
         v: &[f32; N],
     ) -> ([u32; N], [u32; N]) {
@@ -325,7 +324,16 @@ impl BilinearDistribution2D {
         for j in 0..N {
             // As `locate_patch`: x ∈ [0, 1], so the floor is in [0, n].
             i[j] = (unit_closed(u[j]) * cells[0] + 0.5) as u32;
-            k[j] = (unit_closed(v[j]) * cells[1] + 0.5) as u32;
+        }
+        if node_rows {
+            let last = cells[1] as u32 - 1;
+            for j in 0..N {
+                k[j] = 1 + ((unit_closed(v[j]) * cells[1]) as u32).min(last);
+            }
+        } else {
+            for j in 0..N {
+                k[j] = (unit_closed(v[j]) * cells[1] + 0.5) as u32;
+            }
         }
         (i, k)
     }
@@ -708,6 +716,16 @@ impl Axis {
             guide: guide(nodes),
             cells: centred_cells(nodes),
             rows: node_rows(nodes),
+        }
+    }
+
+    /// The count that locates a patch with one product: `n` for the texel-centre
+    /// layout, `m` for the node rows (0 otherwise).
+    fn locating_count(&self) -> f64 {
+        if self.cells > 0.0 {
+            self.cells
+        } else {
+            self.rows
         }
     }
 

@@ -116,9 +116,8 @@ pub(super) fn sample_chunk(
 }
 
 /// The tables [`bilinear_pdfs`] reads for `d`, where it runs: the lat-long map,
-/// the texel-centre layout (not the node lookup's node rows along v, whose
-/// nodes `j/(h − 1)` it does not compute: `centred_tables` is `None` for them),
-/// tables small enough for 32-bit gather indices.
+/// the layouts the light builds (texel centres, or the node lookup's rows along
+/// v), tables small enough for 32-bit gather indices.
 fn bilinear_tables<'a>(
     light: &EnvironmentLight,
     d: &'a BilinearDistribution2D,
@@ -162,10 +161,14 @@ fn bilinear_pdfs(
         _mm512_set1_pd(4.0),
     );
     let cdf_unit = _mm512_set1_pd(1.0 / CDF_ONE as f64);
-    let inv_cells = t.cells.map(|n| {
-        let n = n as u64;
-        n.is_power_of_two().then(|| _mm512_set1_pd(1.0 / n as f64))
+    // (Node rows along v are read: their `(k − 1)/m` is not a product.)
+    let computed = [true, !t.node_rows];
+    let inv_cells = [0, 1].map(|a| {
+        let n = t.cells[a] as u64;
+        (computed[a] && n.is_power_of_two()).then(|| _mm512_set1_pd(1.0 / n as f64))
     });
+    let node_rows = t.node_rows;
+    let last_row = _mm256_set1_epi32(t.cells[1] as i32 - 1);
     let infinity = _mm512_set1_ps(f32::INFINITY);
     let (values, un, vn) = (t.values.as_ptr(), t.u_nodes.as_ptr(), t.v_nodes.as_ptr());
     let (cdf, marginal) = (
@@ -181,7 +184,14 @@ fn bilinear_pdfs(
     let planar_pdfs = |u: __m256, v: __m256| {
         let (u, v) = (unit_closed(u), unit_closed(v));
         let i = _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(u, cells_u), half));
-        let k = _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(v, cells_v), half));
+        // `centred_patches`: along v the texel centres' ⌊v h + ½⌋, or the node
+        // rows' 1 + min(⌊v m⌋, m − 1).
+        let k = if node_rows {
+            let below = _mm512_cvttpd_epu32(_mm512_mul_pd(v, cells_v));
+            _mm256_add_epi32(_mm256_min_epu32(below, last_row), one)
+        } else {
+            _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(v, cells_v), half))
+        };
         let (i, k) = (_mm256_min_epu32(i, last_i), _mm256_min_epu32(k, last_k));
         let top = _mm256_add_epi32(_mm256_mullo_epi32(k, row), i);
         let bottom = _mm256_add_epi32(top, row);
@@ -300,8 +310,9 @@ pub(super) fn radiance_chunk(
 ) -> bool {
     let image = &light.image;
     let (w, h) = (image.width(), image.height());
+    let node = light.options.lookup == Lookup::Node;
     if light.options.mapping != Mapping::Equirectangular
-        || light.options.lookup != Lookup::Bilinear
+        || !(light.options.lookup == Lookup::Bilinear || node)
         || w.saturating_mul(h).saturating_mul(3) > i32::MAX as usize
     {
         return false;
@@ -317,6 +328,9 @@ pub(super) fn radiance_chunk(
         _mm512_set1_ps(0.5),
     );
     let last_column = _mm512_set1_epi32(2 * w32 - 1);
+    // The node lookup's rows: h − 1 intervals, a first row of at most h − 2.
+    let rows = _mm512_set1_ps(len_f32(h.saturating_sub(1)));
+    let last_row = _mm512_set1_epi32((h32 - 2).max(0));
     let scale = _mm512_set1_ps(light.options.scale);
     let texels = image.texels().as_ptr().cast::<f32>();
     for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
@@ -330,12 +344,27 @@ pub(super) fn radiance_chunk(
         let x1 = _mm512_add_epi32(x0, one_i);
         let x1 = _mm512_mask_mov_epi32(x1, _mm512_cmpeq_epi32_mask(x1, wi), zero_i);
         let fs = _mm512_sub_ps(s, _mm512_cvtepi32_ps(k));
-        // Rows, clamped: t = v h + ½.
-        let t = _mm512_add_ps(_mm512_mul_ps(v, hf), half);
-        let i = floor_index(t, hi);
-        let y0 = _mm512_max_epi32(_mm512_sub_epi32(i, one_i), zero_i);
-        let y1 = _mm512_min_epi32(i, _mm512_sub_epi32(hi, one_i));
-        let ft = _mm512_sub_ps(t, _mm512_cvtepi32_ps(i));
+        let (y0, y1, ft) = if !node {
+            // Rows, clamped: t = v h + ½.
+            let t = _mm512_add_ps(_mm512_mul_ps(v, hf), half);
+            let i = floor_index(t, hi);
+            let y0 = _mm512_max_epi32(_mm512_sub_epi32(i, one_i), zero_i);
+            let y1 = _mm512_min_epi32(i, _mm512_sub_epi32(hi, one_i));
+            (y0, y1, _mm512_sub_ps(t, _mm512_cvtepi32_ps(i)))
+        } else if h >= 2 {
+            // `node_pair`: the rows as nodes, s = clamp(v, 0, 1) (h − 1), rows
+            // ⌊s⌋ ≤ h − 2 and the next.
+            let inside = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(v, zero);
+            let s = _mm512_mul_ps(_mm512_maskz_mov_ps(inside, _mm512_min_ps(v, one)), rows);
+            let i = floor_index(s, last_row);
+            (
+                i,
+                _mm512_add_epi32(i, one_i),
+                _mm512_sub_ps(s, _mm512_cvtepi32_ps(i)),
+            )
+        } else {
+            (zero_i, zero_i, zero)
+        };
         // `blend`'s weights (a NaN weight becomes 0).
         let (fs, ft) = (_mm512_max_ps(fs, zero), _mm512_max_ps(ft, zero));
         let (gs, gt) = (_mm512_sub_ps(one, fs), _mm512_sub_ps(one, ft));

@@ -4,7 +4,7 @@
 //! kernels compiled for AVX2 where the CPU has it. Bit for bit the single queries.
 
 use super::{clear_of_cell_edges, solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
-use crate::bilinear::BilinearDistribution2D;
+use crate::bilinear::{BilinearDistribution2D, CentredTables};
 use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, radius_and_csc, EQUIRECT_JACOBIAN};
@@ -374,16 +374,19 @@ impl EnvironmentLight {
         dirs: &[Vec3],
         out: &mut [f32],
     ) {
-        let Some([w, h]) = d.texel_centre_cells() else {
+        let Some(CentredTables {
+            cells, node_rows, ..
+        }) = d.centred_tables()
+        else {
             return self.bilinear_pdfs_located::<PREFETCH>(d, dirs, out);
         };
-        let cells = [w as f64, h as f64];
         self.uv_blocks::<true, _, _>(
             dirs,
             out,
             #[inline(always)]
             |block| {
-                let (i, k) = BilinearDistribution2D::centred_patches(cells, &block.u, &block.v);
+                let (i, k) =
+                    BilinearDistribution2D::centred_patches(cells, node_rows, &block.u, &block.v);
                 if PREFETCH {
                     for (&i, &k) in i.iter().zip(&k) {
                         d.prefetch_patch([i as usize, k as usize]);
