@@ -91,9 +91,13 @@ class TableProduct:
         totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
         floats = {"node_totals": totals}
         if self.bilinear:
-            floats["node_values"] = np.ascontiguousarray(tables["node_values"], dtype=np.float64).reshape(-1)
-            floats["u_nodes"] = np.ascontiguousarray(tables["u_nodes"], dtype=np.float64)
-            floats["v_nodes"] = np.ascontiguousarray(tables["v_nodes"], dtype=np.float64)
+            # Node positions are computed, not read: check that the exported ones
+            # are exactly the two layouts the light builds.
+            for name, n, rows in (("u_nodes", iw, False), ("v_nodes", ih, self.node_rows)):
+                want = self._layout(n, rows)
+                if not np.array_equal(np.asarray(tables[name], np.float64), want):
+                    raise ValueError(f"the product tables' {name} are not a layout this port computes")
+            node_values = np.ascontiguousarray(tables["node_values"], dtype=np.float32).reshape(-1)
         for name in ("cell_slots", "table_slots"):
             # (threshold, alias) pairs as one little-endian 64-bit word each.
             pairs = u32(tables[name])
@@ -105,11 +109,15 @@ class TableProduct:
                 setattr(self, name, U(a))
             for name, a in floats.items():
                 setattr(self, name, mi.Float64(a))
+            if self.bilinear:
+                self.node_values = mi.Float(node_values)
         else:
             for name, a in arrays.items():
                 setattr(self, name, a)
             for name, a in floats.items():
                 setattr(self, name, a)
+            if self.bilinear:
+                self.node_values = node_values
 
     # -- backend helpers ------------------------------------------------------------
 
@@ -321,18 +329,36 @@ class TableProduct:
         return axis(u, self.iw), axis(v, self.ih)
 
     def _corners(self, i, j):
-        """The four node values (f64) around bilinear cell (i, j): top left, top
-        right, bottom left, bottom right."""
+        """The four node values (f32, as f64) around bilinear cell (i, j): top left,
+        top right, bottom left, bottom right."""
         mu = self.iw + 2
         top = j * mu + i
         bottom = top + mu
-        g = self._gather_f64
-        return (g(self.node_values, top), g(self.node_values, top + 1),
-                g(self.node_values, bottom), g(self.node_values, bottom + 1))
+
+        def g(k):
+            if self.jit:
+                return self.mi.Float64(dr.gather(self.mi.Float, self.node_values, k))
+            return float(self.node_values[int(k)])
+
+        return g(top), g(top + 1), g(bottom), g(bottom + 1)
+
+    @staticmethod
+    def _layout(n, rows):
+        """The light's node positions along an axis of n texels (numpy, f64):
+        0, (k − ½)/n for 1 ≤ k ≤ n, 1; or the node rows 0, 0, j/(n − 1), 1, 1."""
+        k = np.arange(1, n + 1, dtype=np.float64)
+        inner = (k - 1.0) / float(n - 1) if rows else (k - 0.5) / float(n)
+        return np.concatenate([[0.0], inner, [1.0]])
+
+    def _node_at(self, k, n, rows):
+        """Node k of `_layout(n, rows)`, computed with the same f64 operations."""
+        x = (self._f64(k) - (1.0 if rows else 0.5)) / float(n - 1 if rows else n)
+        return dr.select(k == 0, 0.0, dr.select(k > n, 1.0, x))
 
     def _nodes(self, i, j):
-        g = self._gather_f64
-        return (g(self.u_nodes, i), g(self.u_nodes, i + 1), g(self.v_nodes, j), g(self.v_nodes, j + 1))
+        iw, ih, rows = self.iw, self.ih, self.node_rows
+        return (self._node_at(i, iw, False), self._node_at(i + 1, iw, False),
+                self._node_at(j, ih, rows), self._node_at(j + 1, ih, rows))
 
     @staticmethod
     def _sample_linear(xi, a, b):

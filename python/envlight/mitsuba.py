@@ -316,7 +316,14 @@ def _emitter_class(mi):
             elif not self.tables.jit:
                 pdf = self.product.pdf(*self._to_light(it.n), *d) if self._has_normal(it) else self.tables.pdf(*d)
             else:
-                pdf = dr.select(self._has_normal(it), self.product.pdf(*self._to_light(it.n), *d), self.tables.pdf(*d))
+                # The light's pdf only where there is no normal, as in _sample.
+                n = self._to_light(it.n)
+                pdf = dr.if_stmt(
+                    args=(d[0], d[1], d[2], n[0], n[1], n[2]),
+                    cond=self._has_normal(it),
+                    true_fn=lambda x, y, z, nx, ny, nz: self.product.pdf(nx, ny, nz, x, y, z),
+                    false_fn=lambda x, y, z, nx, ny, nz: self.tables.pdf(x, y, z),
+                )
             return dr.select(active, pdf, 0.0)
 
         def _radiance(self, d_world, active):
