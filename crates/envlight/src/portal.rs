@@ -596,7 +596,7 @@ fn build_side(light: &EnvironmentLight, portal: &Portal, sigma: f64, n: usize) -
         .map(|k| (PI * ((k / 2) as f64 + SUB[k % 2]) / n as f64 - PI * 0.5).tan())
         .collect();
     let mut f = vec![0.0f32; n * n];
-    f.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+    let fill_row = |(j, row): (usize, &mut [f32])| {
         for (i, out) in row.iter_mut().enumerate() {
             let mut sum = 0.0;
             for sv in 0..2 {
@@ -616,7 +616,16 @@ fn build_side(light: &EnvironmentLight, portal: &Portal, sigma: f64, n: usize) -
             }
             *out = (sum * 0.25) as f32;
         }
-    });
+    };
+    // The table is built inside a `OnceLock` on first use. On a rayon worker (a
+    // renderer's parallel loop asking for it) the build stays on this thread: a
+    // parallel build would let the waiting worker steal another pixel that asks
+    // for the same table and block on the `OnceLock` it is itself initialising.
+    if rayon::current_thread_index().is_some() {
+        f.chunks_mut(n).enumerate().for_each(fill_row);
+    } else {
+        f.par_chunks_mut(n).enumerate().for_each(fill_row);
+    }
     // Support: a cell none of whose samples sees light may still hold some of a
     // lit texel's bilinear footprint; a neighbour's sample then sees it. Such cells
     // get a quarter of their brightest neighbour, so `p > 0` wherever `L > 0`.

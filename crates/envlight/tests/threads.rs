@@ -209,3 +209,81 @@ fn batch_pdf_and_radiance_equal_single_queries() {
         }
     }
 }
+
+/// Runs `work` on a thread and fails if it has not finished within a minute
+/// (a deadlock fails the test instead of hanging the suite).
+fn within_a_minute(what: &str, work: impl FnOnce() + Send + 'static) {
+    let (done, finished) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        work();
+        let _ = done.send(());
+    });
+    if finished
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .is_err()
+    {
+        panic!("{what}: not finished after 60 s (a deadlock?)");
+    }
+}
+
+/// Portal side tables and glossy product tables are built the first time a query
+/// needs them, inside a `OnceLock`. The first queries often come from a caller's
+/// rayon loop; building them must not deadlock there (a parallel build inside the
+/// lock let the waiting worker steal a job asking for the same table).
+#[test]
+fn lazily_built_tables_can_be_first_asked_for_inside_a_rayon_loop() {
+    use envlight::portal::{Portal, PortalLight, PortalOptions};
+    use envlight::product::{Factor, ProductOptions, ProductSampler};
+    use rayon::prelude::*;
+    use std::sync::Arc;
+
+    within_a_minute("portal and glossy tables from rayon workers", || {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        let light =
+            Arc::new(EnvironmentLight::new(builtin::sky(64, 32), LightOptions::default()).unwrap());
+        let v = Vec3::new;
+        let window = Portal::new([
+            v(-1.0, 1.0, 0.5),
+            v(1.0, 1.0, 0.5),
+            v(1.0, 1.0, 1.5),
+            v(-1.0, 1.0, 1.5),
+        ])
+        .unwrap();
+        for round in 0..20 {
+            let portals =
+                PortalLight::new(light.clone(), &[window.clone()], PortalOptions::default())
+                    .unwrap();
+            let seen: f64 = pool.install(|| {
+                (0..64)
+                    .into_par_iter()
+                    .map(|k| {
+                        let p = v(0.02 * k as f32 - 0.6, 0.0, 1.0);
+                        portals
+                            .at(p)
+                            .sample([0.3, 0.7])
+                            .map_or(0.0, |s| s.pdf as f64)
+                    })
+                    .sum()
+            });
+            assert!(seen > 0.0, "round {round}: no portal sample");
+            let product = ProductSampler::new(light.clone(), ProductOptions::default());
+            let glossy: f64 = pool.install(|| {
+                (0..64)
+                    .into_par_iter()
+                    .map(|k| {
+                        let n = v(0.0, (k as f32 * 0.1).sin(), 1.0).normalized().unwrap();
+                        let factor = Factor::glossy(n, n, 0.05 + 0.005 * k as f32);
+                        product
+                            .at(&factor)
+                            .sample([0.4, 0.6])
+                            .map_or(0.0, |s| s.pdf as f64)
+                    })
+                    .sum()
+            });
+            assert!(glossy > 0.0, "round {round}: no glossy product sample");
+        }
+    });
+}

@@ -107,31 +107,48 @@ impl Tables {
         let nodes = (n + 1) * (n + 1);
         let mut slots: Vec<Slot> = pick::large_table(nodes * patches);
         let mut by_node = vec![0u32; nodes * patches];
-        let (empty, totals): (Vec<bool>, Vec<f64>) = slots
-            .par_chunks_mut(patches)
-            .zip(by_node.par_chunks_mut(patches))
-            .enumerate()
-            .map_init(
-                || vec![0.0f32; patches],
-                |weights, (node, (slots, widths))| {
-                    let (axis, spread) = neighbourhood(n, node % (n + 1), node / (n + 1));
-                    let total = fill_weights(fine, &axis, spread, lobe, bound, skip, weights);
-                    // An empty table: widths 0, and slots that pick nothing.
-                    let empty = pick::fixed_point_widths(weights, widths) == 0.0;
-                    pick::build(widths, slots);
-                    (empty, if empty { 0.0 } else { total })
-                },
-            )
-            .unzip();
+        let fill =
+            |weights: &mut Vec<f32>,
+             (node, (slots, widths)): (usize, (&mut [Slot], &mut [u32]))| {
+                let (axis, spread) = neighbourhood(n, node % (n + 1), node / (n + 1));
+                let total = fill_weights(fine, &axis, spread, lobe, bound, skip, weights);
+                // An empty table: widths 0, and slots that pick nothing.
+                let empty = pick::fixed_point_widths(weights, widths) == 0.0;
+                pick::build(widths, slots);
+                (empty, if empty { 0.0 } else { total })
+            };
+        // Lobe tables are built on first use, inside a `OnceLock`, possibly from a
+        // caller's rayon loop. There the build stays on the calling thread: a
+        // parallel one would let the waiting worker steal a job that asks for the
+        // same tables and block on the `OnceLock` it is itself initialising.
+        let on_worker = rayon::current_thread_index().is_some();
+        let (empty, totals): (Vec<bool>, Vec<f64>) = if on_worker {
+            let mut weights = vec![0.0f32; patches];
+            slots
+                .chunks_mut(patches)
+                .zip(by_node.chunks_mut(patches))
+                .enumerate()
+                .map(|item| fill(&mut weights, item))
+                .unzip()
+        } else {
+            slots
+                .par_chunks_mut(patches)
+                .zip(by_node.par_chunks_mut(patches))
+                .enumerate()
+                .map_init(|| vec![0.0f32; patches], fill)
+                .unzip()
+        };
+        let transpose = |(k, row): (usize, &mut [u32])| {
+            for (m, w) in row.iter_mut().enumerate() {
+                *w = by_node[m * patches + k];
+            }
+        };
         let mut widths: Vec<u32> = pick::large_table(patches * nodes);
-        widths
-            .par_chunks_mut(nodes)
-            .enumerate()
-            .for_each(|(k, row)| {
-                for (m, w) in row.iter_mut().enumerate() {
-                    *w = by_node[m * patches + k];
-                }
-            });
+        if on_worker {
+            widths.chunks_mut(nodes).enumerate().for_each(transpose);
+        } else {
+            widths.par_chunks_mut(nodes).enumerate().for_each(transpose);
+        }
         Self {
             n,
             patches,
