@@ -237,7 +237,8 @@ pub(crate) enum Place {
 
 /// Where `d` is, judged by its `(u, v)` in the grid's own parameterisation: within
 /// [`EDGE_BAND`] of a cell edge in u or v (on the equal-area square, the folded
-/// boundary is a cell edge in both halves of the fold), or in the pole band.
+/// boundary is a cell edge in both halves of the fold) or of a centre line the
+/// grid marks as an edge ([`Grid::centre_edges`]), or in the pole band.
 pub(crate) fn place(grid: Option<Grid>, frame: &Frame, d: Vec3) -> Place {
     let [u, v] = frame.local_uv(d);
     if frame.param.near_pole([u, v]) {
@@ -246,14 +247,69 @@ pub(crate) fn place(grid: Option<Grid>, frame: &Frame, d: Vec3) -> Place {
     let Some(g) = grid else {
         return Place::Interior;
     };
-    let to_edge = |x: f64, n: usize| {
+    // Distance to the nearest cell edge, and to the nearest centre line when
+    // those are edges of the sampler's map too.
+    let to_edge = |x: f64, n: usize, centres: bool| {
         let s = x * n as f64;
-        (s - s.round()).abs() / n as f64
+        let edge = (s - s.round()).abs();
+        let centre = if centres {
+            (s - 0.5 - (s - 0.5).round()).abs()
+        } else {
+            f64::INFINITY
+        };
+        edge.min(centre) / n as f64
     };
     let [w, h] = g.cells();
-    if to_edge(u, w) < EDGE_BAND || to_edge(v, h) < EDGE_BAND {
+    let [cu, cv] = g.centre_edges();
+    if to_edge(u, w, cu) < EDGE_BAND || to_edge(v, h, cv) < EDGE_BAND {
         Place::NearEdge
     } else {
         Place::Interior
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use envlight::light::{Density, Mapping};
+    use envlight::{builtin, EnvironmentLight, LightOptions};
+
+    /// The piecewise-bilinear density's patches run between texel centres, so a
+    /// sample on a centre line is at an edge of its map from `ξ` (its inverse may
+    /// land in the next patch), as a texel edge is for the constant density.
+    #[test]
+    fn centre_lines_are_edges_for_the_bilinear_density_only() {
+        for mapping in [Mapping::Equirectangular, Mapping::EqualArea] {
+            let light = |density| {
+                let options = LightOptions {
+                    density,
+                    mapping,
+                    ..Default::default()
+                };
+                EnvironmentLight::new(builtin::sky(64, 32), options).unwrap()
+            };
+            let (constant, bilinear) = (
+                light(Density::PiecewiseConstant),
+                light(Density::PiecewiseBilinear),
+            );
+            let [w, h] = constant.grid().unwrap().cells();
+            let frame = Frame::of(&constant);
+            // On a centre line along v, in the middle of a cell along u; then the
+            // middle of a cell along both, a quarter off either line.
+            let on_centre = frame.world_at(10.5 / w as f64 + 0.25 / w as f64, 11.5 / h as f64);
+            let inside = frame.world_at(10.25 / w as f64, 11.25 / h as f64);
+            let c = (constant.grid(), bilinear.grid());
+            assert_eq!(
+                place(c.0, &frame, on_centre),
+                Place::Interior,
+                "{mapping:?}"
+            );
+            assert_eq!(
+                place(c.1, &frame, on_centre),
+                Place::NearEdge,
+                "{mapping:?}"
+            );
+            assert_eq!(place(c.1, &frame, inside), Place::Interior, "{mapping:?}");
+        }
     }
 }

@@ -95,6 +95,7 @@ impl Quadrature {
                 height,
                 node_rows,
                 to_world,
+                ..
             } => {
                 // Texel edges and node rows interleave: 2h - 2 intervals along v.
                 let (node_rows, height) = if node_rows && height >= 2 {
@@ -120,7 +121,7 @@ impl Quadrature {
                     node_rows,
                 }
             }
-            Grid::EqualArea { size, to_world } => {
+            Grid::EqualArea { size, to_world, .. } => {
                 let min_side = ((min_cells[0] * min_cells[1]) as f64).sqrt().ceil() as usize;
                 let mut sub = min_side.div_ceil(size).div_ceil(step).max(1) * step;
                 while (size * sub).pow(2) > max_total && sub > step {

@@ -32,6 +32,11 @@ pub enum Grid {
         /// pole to pole (`v = j/(height-1)`, [`envlight::Lookup::Node`]) rather
         /// than at the cells' centre lines.
         node_rows: bool,
+        /// Whether the sampler's map from `ξ` also jumps on the cells' centre lines
+        /// along u and along v (the piecewise-bilinear density's patches run
+        /// between texel centres): samples within rounding of them are exempt
+        /// from the consistency checks, as at cell edges.
+        centre_edges: [bool; 2],
         /// Grid frame to world.
         to_world: Rotation,
     },
@@ -41,6 +46,8 @@ pub enum Grid {
     EqualArea {
         /// Cells along u and along v.
         size: usize,
+        /// As [`Grid::Equirect`]'s `centre_edges`.
+        centre_edges: [bool; 2],
         /// Grid frame to world.
         to_world: Rotation,
     },
@@ -59,6 +66,16 @@ impl Grid {
         match self {
             Grid::Equirect { width, height, .. } => [width, height],
             Grid::EqualArea { size, .. } => [size, size],
+        }
+    }
+
+    /// Along u and v, whether the cells' centre lines are edges of the sampler's
+    /// map from `ξ` too.
+    pub fn centre_edges(self) -> [bool; 2] {
+        match self {
+            Grid::Equirect { centre_edges, .. } | Grid::EqualArea { centre_edges, .. } => {
+                centre_edges
+            }
         }
     }
 
@@ -179,19 +196,20 @@ impl SphereSampler for EnvironmentLight {
         let to_world = self.options().rotation;
         let (h, options) = (self.image().height(), self.options());
         let node_rows = options.lookup == envlight::Lookup::Node;
+        // The piecewise-bilinear density's patches run between its nodes: the
+        // texel centres along u, and along v the centres too, or the node
+        // lookup's rows (then the grid's own rows, below).
+        let bilinear = options.density == envlight::light::Density::PiecewiseBilinear;
         Some(match self.mapping() {
             // The node lookup's piecewise-bilinear density lives on the `h - 1`
             // intervals between its node rows `k/(h-1)` (where the radiance has
             // its kinks too), bilinear on each: a uniform grid of those rows.
-            envlight::light::Mapping::Equirectangular
-                if node_rows
-                    && h >= 2
-                    && options.density == envlight::light::Density::PiecewiseBilinear =>
-            {
+            envlight::light::Mapping::Equirectangular if node_rows && h >= 2 && bilinear => {
                 Grid::Equirect {
                     width: self.image().width(),
                     height: h - 1,
                     node_rows: false,
+                    centre_edges: [true, false],
                     to_world,
                 }
             }
@@ -199,10 +217,12 @@ impl SphereSampler for EnvironmentLight {
                 width: self.image().width(),
                 height: self.image().height(),
                 node_rows,
+                centre_edges: [bilinear, bilinear],
                 to_world,
             },
             envlight::light::Mapping::EqualArea => Grid::EqualArea {
                 size: self.image().width(),
+                centre_edges: [bilinear, bilinear],
                 to_world,
             },
         })

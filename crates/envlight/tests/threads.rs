@@ -253,9 +253,12 @@ fn lazily_built_tables_can_be_first_asked_for_inside_a_rayon_loop() {
         ])
         .unwrap();
         for round in 0..20 {
-            let portals =
-                PortalLight::new(light.clone(), &[window.clone()], PortalOptions::default())
-                    .unwrap();
+            let portals = PortalLight::new(
+                light.clone(),
+                std::slice::from_ref(&window),
+                PortalOptions::default(),
+            )
+            .unwrap();
             let seen: f64 = pool.install(|| {
                 (0..64)
                     .into_par_iter()

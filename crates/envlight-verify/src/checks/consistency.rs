@@ -49,12 +49,14 @@ impl Consistency {
     /// Exempt fraction allowed: edges and poles are measure-zero sets widened by
     /// float noise, so they hold a tiny fraction of the samples. Samples spread
     /// evenly within their cells put `2 EDGE_BAND (w + h)` of themselves in the edge
-    /// bands of a `w × h` grid (1.6% for 16384 columns, 0.15% for 1024×512); twice
-    /// that plus 0.5% is allowed.
+    /// bands of a `w × h` grid (1.6% for 16384 columns, 0.15% for 1024×512), twice
+    /// as many along an axis whose centre lines are edges too; twice that plus 0.5%
+    /// is allowed.
     pub fn max_exempt_fraction(grid: Option<Grid>) -> f64 {
         let expected = grid.map_or(0.0, |g| {
             let [w, h] = g.cells();
-            2.0 * EDGE_BAND * (w + h) as f64
+            let [cu, cv] = g.centre_edges().map(|c| if c { 2.0 } else { 1.0 });
+            2.0 * EDGE_BAND * (cu * w as f64 + cv * h as f64)
         });
         2.0 * expected + 0.005
     }
