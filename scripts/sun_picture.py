@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Makes docs/img/sun.png, the README's picture of sun extraction.
+"""Makes docs/img/sun.png, the picture of sun extraction in docs/sun.md.
 
 Every panel is the envlight tool's own picture: `envlight sun MAP --residual` writes
 the map without its sun, `envlight importance` pictures the map (its sun ringed in

@@ -17,6 +17,29 @@
 //!   calling thread, in the CLI's words (the file, the texel, the argument);
 //! - handles are immutable once built, so a `const` handle serves any number of
 //!   threads at once.
+//!
+//! The calls, from Rust for the example (a C program makes the same ones through
+//! `envlight.h`; `docs/c-api.md` has C and C++ examples):
+//!
+//! ```
+//! use envlight_c::*;
+//!
+//! let rgb = [1.0f32, 1.0, 1.0, 2.0, 2.0, 2.0]; // a 2 x 1 map
+//! let mut light = std::ptr::null_mut();
+//! let status = envlight_light_from_rgb(rgb.as_ptr(), 2, 1, std::ptr::null(), &mut light);
+//! assert_eq!(status, envlight_status::ENVLIGHT_OK);
+//! let mut s = envlight_sample::default();
+//! assert!(envlight_light_sample(light, [0.25f32, 0.75].as_ptr(), &mut s));
+//! assert_eq!(envlight_light_pdf(light, s.direction.as_ptr()), s.pdf);
+//! envlight_light_free(light);
+//!
+//! // A bad argument is a status and a message, never a crash.
+//! let status = envlight_light_from_rgb(std::ptr::null(), 2, 1, std::ptr::null(), &mut light);
+//! assert_eq!(status, envlight_status::ENVLIGHT_ERROR_INVALID_ARGUMENT);
+//! let mut message = [0u8; 256];
+//! let n = envlight_last_error(message.as_mut_ptr().cast(), message.len());
+//! assert!(n > 0);
+//! ```
 #![allow(non_camel_case_types)]
 // Every extern function takes raw pointers from C and checks them before use; its
 // safety contract is the C documentation (docs/c-api.md), not a Rust `unsafe fn`.

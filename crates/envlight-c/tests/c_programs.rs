@@ -498,38 +498,121 @@ fn shared_library_exports_only_envlight_symbols() {
     );
 }
 
-/// README's C example, as a newcomer would build it: through pkg-config, shared
-/// and static, on the built-in pixels and on a map file.
+#[path = "../../envlight-cli/tests/common/doc_blocks.rs"]
+mod doc_blocks;
+
+/// Every `c`, `cpp` and `cmake` block of README.md and docs/*.md, as a newcomer
+/// would use it: a C program (one with `main`) built through pkg-config, shared and
+/// static, and run with no argument and with a map file; C declarations (no
+/// `main`) compiled after `#include <envlight.h>`, so they must match the header;
+/// C++ likewise with `envlight.hpp`; a CMake fragment appended to a project that
+/// builds a one-line program `app` and runs it.
 #[test]
-fn readme_example_builds_and_runs() {
+fn docs_code_blocks_build_and_run() {
     let Some(b) = programs() else { return };
-    let readme =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
-            .expect("README.md");
-    let section = &readme[readme
-        .find("## C and C++")
-        .expect("README has a C and C++ section")..];
-    let start = section.find("```c\n").expect("a C block") + 5;
-    let code = &section[start..start + section[start..].find("```").unwrap()];
-    let source = b.work.path().join("example.c");
-    std::fs::write(&source, code).unwrap();
     let maps: Vec<String> = real().map(|m| m.arg).into_iter().collect();
-    for package in ["envlight", "envlight-static"] {
-        let flags = run(Command::new("pkg-config")
+    let pc = |package: &str| -> Vec<String> {
+        run(Command::new("pkg-config")
             .args(["--cflags", "--libs", package])
-            .env("PKG_CONFIG_PATH", b.prefix.join("lib/pkgconfig")));
-        let exe = b.work.path().join(format!("example-{package}"));
-        run(Command::new("cc")
-            .args(["-std=c11", "-Wall", "-Wextra", "-Werror"])
-            .arg(&source)
-            .args(flags.split_whitespace())
-            .arg("-o")
-            .arg(&exe));
-        let out = run(&mut Command::new(&exe));
-        assert!(out.starts_with("pdf "), "{out}");
-        for map in &maps {
-            let out = run(Command::new(&exe).arg(map));
-            assert!(out.starts_with("pdf "), "{out}");
+            .env("PKG_CONFIG_PATH", b.prefix.join("lib/pkgconfig")))
+        .split_whitespace()
+        .map(str::to_string)
+        .collect()
+    };
+    let mut checked = 0;
+    for block in doc_blocks::all_blocks() {
+        let name = format!(
+            "doc_{}_{}",
+            block.file.replace(['/', '.', '-'], "_"),
+            block.line
+        );
+        let dir = b.work.path().join(&name);
+        std::fs::create_dir_all(&dir).unwrap();
+        let has_main = block.code.contains("main(");
+        match block.info.as_str() {
+            "c" | "cpp" => {
+                let cpp = block.info == "cpp";
+                let (compiler, std, header, ext) = if cpp {
+                    ("c++", "-std=c++17", "envlight.hpp", "cpp")
+                } else {
+                    ("cc", "-std=c11", "envlight.h", "c")
+                };
+                let source = dir.join(format!("block.{ext}"));
+                let code = if has_main {
+                    block.code.clone()
+                } else {
+                    format!("#include <{header}>\n{}", block.code)
+                };
+                std::fs::write(&source, code).unwrap();
+                let packages: &[&str] = if has_main {
+                    &["envlight", "envlight-static"]
+                } else {
+                    &["envlight"]
+                };
+                for package in packages {
+                    let exe = dir.join(format!("block-{package}"));
+                    let mut command = Command::new(compiler);
+                    command
+                        .args([std, "-Wall", "-Wextra", "-Werror", "-pedantic"])
+                        .arg(&source);
+                    if has_main {
+                        command.args(pc(package)).arg("-o").arg(&exe);
+                    } else {
+                        // A declaration may spell a pointer as an array (`const
+                        // float u[2]`) for the reader: the same type in C.
+                        command
+                            .args(pc(package))
+                            .args(["-fsyntax-only", "-Wno-array-parameter"]);
+                    }
+                    run(&mut command);
+                    if has_main {
+                        run(&mut Command::new(&exe));
+                        for map in &maps {
+                            run(Command::new(&exe).arg(map));
+                        }
+                    }
+                }
+            }
+            "cmake" => {
+                std::fs::write(
+                    dir.join("CMakeLists.txt"),
+                    format!(
+                        "cmake_minimum_required(VERSION 3.16)\nproject(docs_block C)\n\
+                         add_executable(app app.c)\n{}",
+                        block.code
+                    ),
+                )
+                .unwrap();
+                std::fs::write(
+                    dir.join("app.c"),
+                    "#include <envlight.h>\nint main(void) {\n    \
+                     envlight_light_options o = envlight_light_options_default();\n    \
+                     return o.scale == 1.0f ? 0 : 1;\n}\n",
+                )
+                .unwrap();
+                let build = dir.join("build");
+                run(Command::new("cmake")
+                    .arg("-S")
+                    .arg(&dir)
+                    .arg("-B")
+                    .arg(&build)
+                    .arg(format!("-DCMAKE_PREFIX_PATH={}", b.prefix.display())));
+                run(Command::new("cmake").arg("--build").arg(&build));
+                run(&mut Command::new(build.join("app")));
+            }
+            _ => continue,
         }
+        println!(
+            "{}:{} ```{}: built{}",
+            block.file,
+            block.line,
+            block.info,
+            if has_main { " and ran" } else { "" }
+        );
+        checked += 1;
     }
+    assert!(
+        checked > 0,
+        "no C, C++ or CMake block in README.md or docs/"
+    );
 }

@@ -1,5 +1,5 @@
 //! How closely the GPU reproduces the CPU, row by row: the measure behind the
-//! tests, `envlight sample --device gpu`'s promise and README's precision note.
+//! tests, `envlight sample --device gpu`'s promise and docs/gpu.md's precision note.
 //!
 //! A row is a direction with its pdf and radiance, as `envlight sample` and
 //! `envlight eval` write them. Two rows agree when both say "no sample" (pdf 0),

@@ -5,7 +5,7 @@
 //! The CPU light builds the tables ([`envlight::EnvironmentLight::gpu_tables`]);
 //! the GPU only reads them, with the CPU's algorithms (docs/gpu-tables.md), so the
 //! same `ξ` give the same directions, pdfs and radiance up to f32 rounding
-//! (README, "GPU", has the measured agreement).
+//! (docs/gpu.md; BENCHMARKS.md has the measured agreement).
 //!
 //! ```no_run
 //! use envlight::{builtin, EnvironmentLight, LightOptions};
@@ -762,3 +762,9 @@ fn padded_directions(directions: &[[f32; 3]]) -> Vec<f32> {
         .flat_map(|d| [d[0], d[1], d[2], 0.0])
         .collect()
 }
+
+/// The GPU guide (`docs/gpu.md`; `docs` here is a link to the repository's), whose
+/// Rust blocks are doctests of this crate.
+#[doc = include_str!("../docs/gpu.md")]
+#[cfg(doctest)]
+pub struct GpuGuide;

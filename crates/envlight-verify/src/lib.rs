@@ -37,6 +37,18 @@
 //! are expensive (a GPU dispatch each) costs a few dispatches per check; only
 //! `invert` is asked point by point. The batch results must equal the single
 //! calls', so the figures are those of the single calls.
+//!
+//! ```
+//! use envlight::{builtin, EnvironmentLight, LightOptions};
+//! use envlight_verify::{format_table, run, Config, Integrand};
+//!
+//! // The built-in sky's light against its own luminance, with a small sample
+//! // budget (`envlight verify --samples 20000` asks the same).
+//! let light = EnvironmentLight::new(builtin::sky(64, 32), LightOptions::default()).unwrap();
+//! let report = run(&light, &Integrand::luminance(), &Config::with_samples(20_000, 1), &|_| {});
+//! assert!(report.failures().is_empty(), "{:?}", report.failures());
+//! println!("{}", format_table(&report.rows("inversion")));
+//! ```
 
 #![warn(missing_docs)]
 

@@ -1,5 +1,5 @@
-//! Compares every sampler × density × mapping on environment maps: the table in the
-//! README. For each combination it reports the efficiency `(∫Y)²/∫(Y²/p)`, the RMSE
+//! Compares every sampler × density × mapping on environment maps: the table in
+//! BENCHMARKS.md. For each combination it reports the efficiency `(∫Y)²/∫(Y²/p)`, the RMSE
 //! of irradiance estimates with stratified (jittered) ξ at 16, 64 and 256 samples,
 //! ns per `sample` on one thread, build time and bytes of sampling data per texel.
 //!

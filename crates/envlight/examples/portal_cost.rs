@@ -1,4 +1,4 @@
-//! The cost per point of the portal light (README, "Portals"): nanoseconds per
+//! The cost per point of the portal light (docs/portals.md): nanoseconds per
 //! `at(p)` (the per-point windows), per `sample` and per `pdf` at a point, and the
 //! build time and memory, for one and two portals over a map.
 //!

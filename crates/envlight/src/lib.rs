@@ -79,3 +79,36 @@ pub struct ReadmeDoctests;
 #[doc = include_str!("../README.md")]
 #[cfg(doctest)]
 pub struct CrateReadmeDoctests;
+
+/// The guides in the repository's `docs/` (`docs` here is a link to it, which the
+/// package holds as a copy): every Rust block in them is a doctest of this crate,
+/// except `docs/gpu.md`'s, which are `envlight-gpu`'s. The docs test
+/// (`crates/envlight-cli/tests/docs.rs`) fails when a guide with Rust blocks is
+/// missing from this list.
+#[cfg(doctest)]
+pub mod guides {
+    #[doc = include_str!("../docs/light.md")]
+    pub struct Light;
+    #[doc = include_str!("../docs/product-sampling.md")]
+    pub struct ProductSampling;
+    #[doc = include_str!("../docs/portals.md")]
+    pub struct Portals;
+    #[doc = include_str!("../docs/sun.md")]
+    pub struct Sun;
+    #[doc = include_str!("../docs/gpu-tables.md")]
+    pub struct GpuTables;
+    #[doc = include_str!("../docs/c-api.md")]
+    pub struct CApi;
+    #[doc = include_str!("../docs/python.md")]
+    pub struct Python;
+    #[doc = include_str!("../docs/mitsuba.md")]
+    pub struct Mitsuba;
+    #[doc = include_str!("../docs/cli.md")]
+    pub struct Cli;
+    #[doc = include_str!("../docs/conventions.md")]
+    pub struct Conventions;
+    #[doc = include_str!("../docs/verification.md")]
+    pub struct Verification;
+    #[doc = include_str!("../docs/performance.md")]
+    pub struct Performance;
+}

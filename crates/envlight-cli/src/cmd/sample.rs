@@ -58,7 +58,7 @@ the directions go from the point --at through the portals only, and pdf is the p
 density there (rows with no sample, when nothing lit is seen through a portal, have pdf 0).\n\n\
 With --device gpu the rows come from the GPU (the same ξ, drawn on the device), in the \
 same format: they agree with the CPU's to about 1e-4 rad in direction and 1e-3 in pdf and \
-radiance (README, \"GPU\"); a row whose direction rounds into a cell of zero density has \
+radiance (docs/gpu.md); a row whose direction rounds into a cell of zero density has \
 pdf 0.\n\n",
     crate::conventions!()
 ))]
