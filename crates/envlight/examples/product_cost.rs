@@ -64,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (8, [128, 64]),
         (16, [64, 32]),
         (16, [128, 64]),
+        (32, [64, 32]),
         (32, [128, 64]),
     ] {
         let options = ProductOptions {
