@@ -68,6 +68,15 @@ pub use math::{Rotation, Vec3};
 pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
 
+/// Whether a table built on first use (inside a `OnceLock`: portal sides, glossy
+/// product tables) may be built in parallel here. Not on a rayon worker: a caller's
+/// parallel loop asking for the table would let the waiting worker steal another
+/// job that asks for the same table and block on the `OnceLock` it is itself
+/// initialising (a deadlock). The result is the same either way.
+pub(crate) fn lazy_build_in_parallel() -> bool {
+    rayon::current_thread_index().is_none()
+}
+
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
 /// `repository-README.md` is a link to the repository's README.md, which the
 /// package holds as a copy: the doctests run from the package too.

@@ -617,14 +617,10 @@ fn build_side(light: &EnvironmentLight, portal: &Portal, sigma: f64, n: usize) -
             *out = (sum * 0.25) as f32;
         }
     };
-    // The table is built inside a `OnceLock` on first use. On a rayon worker (a
-    // renderer's parallel loop asking for it) the build stays on this thread: a
-    // parallel build would let the waiting worker steal another pixel that asks
-    // for the same table and block on the `OnceLock` it is itself initialising.
-    if rayon::current_thread_index().is_some() {
-        f.chunks_mut(n).enumerate().for_each(fill_row);
-    } else {
+    if crate::lazy_build_in_parallel() {
         f.par_chunks_mut(n).enumerate().for_each(fill_row);
+    } else {
+        f.chunks_mut(n).enumerate().for_each(fill_row);
     }
     // Support: a cell none of whose samples sees light may still hold some of a
     // lit texel's bilinear footprint; a neighbour's sample then sees it. Such cells

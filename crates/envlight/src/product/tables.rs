@@ -117,25 +117,22 @@ impl Tables {
                 pick::build(widths, slots);
                 (empty, if empty { 0.0 } else { total })
             };
-        // Lobe tables are built on first use, inside a `OnceLock`, possibly from a
-        // caller's rayon loop. There the build stays on the calling thread: a
-        // parallel one would let the waiting worker steal a job that asks for the
-        // same tables and block on the `OnceLock` it is itself initialising.
-        let on_worker = rayon::current_thread_index().is_some();
-        let (empty, totals): (Vec<bool>, Vec<f64>) = if on_worker {
+        // Lobe tables are built on first use (`crate::lazy_build_in_parallel`).
+        let parallel = crate::lazy_build_in_parallel();
+        let (empty, totals): (Vec<bool>, Vec<f64>) = if parallel {
+            slots
+                .par_chunks_mut(patches)
+                .zip(by_node.par_chunks_mut(patches))
+                .enumerate()
+                .map_init(|| vec![0.0f32; patches], fill)
+                .unzip()
+        } else {
             let mut weights = vec![0.0f32; patches];
             slots
                 .chunks_mut(patches)
                 .zip(by_node.chunks_mut(patches))
                 .enumerate()
                 .map(|item| fill(&mut weights, item))
-                .unzip()
-        } else {
-            slots
-                .par_chunks_mut(patches)
-                .zip(by_node.par_chunks_mut(patches))
-                .enumerate()
-                .map_init(|| vec![0.0f32; patches], fill)
                 .unzip()
         };
         let transpose = |(k, row): (usize, &mut [u32])| {
@@ -144,10 +141,10 @@ impl Tables {
             }
         };
         let mut widths: Vec<u32> = pick::large_table(patches * nodes);
-        if on_worker {
-            widths.chunks_mut(nodes).enumerate().for_each(transpose);
-        } else {
+        if parallel {
             widths.par_chunks_mut(nodes).enumerate().for_each(transpose);
+        } else {
+            widths.chunks_mut(nodes).enumerate().for_each(transpose);
         }
         Self {
             n,
