@@ -38,8 +38,8 @@
 //! sampler does.)
 //!
 use crate::distribution::{
-    positive_weight, probability_of_widths, sanitize, CellSample, Distribution2D, Sample2D,
-    ONE_MINUS_EPSILON, STAGED_BLOCK,
+    positive_weight, sanitize, CellSample, Distribution2D, Sample2D, CDF_ONE, ONE_MINUS_EPSILON,
+    STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
 use crate::math::prefetch_ptr;
@@ -58,9 +58,10 @@ const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
 /// Cost: sampling is two guide-table lookups with short scans plus two square
 /// roots, O(1) expected; `pdf` and `invert` locate the patch through a guide table
 /// on the node positions (O(1) for evenly spread nodes, O(log n) at worst) and read
-/// its four corners and its two CDF widths. Memory: 4 bytes per node for the
-/// values plus the patch distribution's 5-6 bytes per patch, and 12 per node
-/// position.
+/// its four corners and its factor (`P_ik / M_ik` with the constants folded in,
+/// so the density is a weighted sum and one product in `f32`). Memory: 4 bytes
+/// per node for the values, the patch distribution's 5-6 bytes per patch and 4
+/// more for the factors, and 12 per node position.
 ///
 /// ```
 /// use envlight::bilinear::BilinearDistribution2D;
@@ -82,21 +83,33 @@ pub struct BilinearDistribution2D {
     patches: Distribution2D,
     /// `I = ∫∫ B du dv = Σ M_ik`.
     integral: f64,
+    /// Per patch (row-major over the patch grid), the factor `F_ik` that turns the
+    /// corners weighted by the point's normalised distances to the sides into
+    /// the density ([`pdf_from_weights`]): `4 P_ik / (c_u c_v Δu² Δv² Σf)` over
+    /// [`Self::scale`], in `f32`; 0 for a patch of no mass or never picked.
+    factors: Vec<f32>,
+    /// A power of two that brings the weighted corners near 1 when the integral
+    /// is outside `[2⁻⁶⁴, 2⁶⁴]` (so that the factors stay inside `f32`'s range),
+    /// else 1.
+    scale: f32,
 }
 
 /// A [`BilinearDistribution2D`] on a layout the light builds as tables (see
 /// [`BilinearDistribution2D::centred_tables`]): the node values (`mu` per row),
-/// the node positions, the counts that locate a patch with one product (along u
-/// the texel count `w`, patch `⌊u w + ½⌋`; along v the texel count `h`, patch
-/// `⌊v h + ½⌋`, or with `node_rows` the row intervals `m = h − 1`, patch
-/// `1 + min(⌊v m⌋, m − 1)`) and the patches' distribution.
+/// the patches' factors (`mu − 1` per row) and the scale of
+/// [`pdf_from_weights`], and the counts that locate a patch with one product
+/// (along u the texel count `w`, patch `⌊u w + ½⌋`; along v the texel count `h`,
+/// patch `⌊v h + ½⌋`, or with `node_rows` the row intervals `m = h − 1`, patch
+/// `1 + min(⌊v m⌋, m − 1)`), which are also the units of the distances to the
+/// patch's sides ([`centred_weights`], [`row_weights`]).
 pub(crate) struct CentredTables<'a> {
+    /// Nodes per row.
+    pub mu: usize,
     pub values: &'a [f32],
-    pub u_nodes: &'a [f64],
-    pub v_nodes: &'a [f64],
+    pub factors: &'a [f32],
+    pub scale: f32,
     pub cells: [f64; 2],
     pub node_rows: bool,
-    pub patches: crate::distribution::CellTables<'a>,
 }
 
 impl BilinearDistribution2D {
@@ -157,12 +170,22 @@ impl BilinearDistribution2D {
             },
         );
         let integral: f64 = row_sums.iter().sum();
+        let (u, v) = (Axis::new(u_nodes), Axis::new(v_nodes));
+        let scale = factor_scale(integral);
+        let factors = patch_factors(
+            &values,
+            [u_nodes, v_nodes],
+            &patches,
+            u.count() * v.count() * scale as f64,
+        );
         Ok(Self {
-            u: Axis::new(u_nodes),
-            v: Axis::new(v_nodes),
+            u,
+            v,
             values,
             patches,
             integral,
+            factors,
+            scale,
         })
     }
 
@@ -219,12 +242,12 @@ impl BilinearDistribution2D {
     /// other node layouts.
     pub(crate) fn centred_tables(&self) -> Option<CentredTables<'_>> {
         self.image_cells().map(|(_, node_rows)| CentredTables {
+            mu: self.u.nodes.len(),
             values: &self.values,
-            u_nodes: &self.u.nodes,
-            v_nodes: &self.v.nodes,
+            factors: &self.factors,
+            scale: self.scale,
             cells: [self.u.cells, self.v.locating_count()],
             node_rows,
-            patches: self.patches.cell_tables(),
         })
     }
 
@@ -232,6 +255,7 @@ impl BilinearDistribution2D {
     /// positions with their guides).
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.values.as_slice())
+            + std::mem::size_of_val(self.factors.as_slice())
             + self.patches.memory_bytes()
             + self.u.memory_bytes()
             + self.v.memory_bytes()
@@ -251,19 +275,19 @@ impl BilinearDistribution2D {
     }
 
     /// The density at `(u, v)` in patch `[i, k]`: `P_ik · B(u, v) / M_ik`, 0 for a
-    /// patch of no mass.
-    #[inline(always)]
-    fn patch_pdf(&self, i: usize, k: usize, u: f64, v: f64) -> f32 {
-        self.patch_pdf_given(i, k, u, v, self.patches.cell_probability(i, k))
-    }
-
-    /// [`Self::patch_pdf`] with `P_ik` given ([`pdf_from_corners`]).
+    /// patch of no mass ([`pdf_from_weights`]).
     ///
     /// # Panics
     /// When the patch is outside the grid.
     #[inline(always)]
-    fn patch_pdf_given(&self, i: usize, k: usize, u: f64, v: f64, probability: f64) -> f32 {
-        pdf_from_corners(self.corners(i, k), self.sides(i, k), probability, [u, v])
+    fn patch_pdf(&self, i: usize, k: usize, u: f64, v: f64) -> f32 {
+        let factor = self.factors[k * (self.u.nodes.len() - 1) + i];
+        pdf_from_weights(
+            corners32(&self.values, self.u.nodes.len(), i, k),
+            [self.u.weights(i, u), self.v.weights(k, v)],
+            factor,
+            self.scale,
+        )
     }
 
     /// The patch `[i, k]` holding `uv` (clamped onto the square), and the point as
@@ -284,7 +308,8 @@ impl BilinearDistribution2D {
         let top = k.wrapping_mul(mu).wrapping_add(i);
         prefetch_ptr(self.values.as_ptr().wrapping_add(top));
         prefetch_ptr(self.values.as_ptr().wrapping_add(top.wrapping_add(mu)));
-        self.patches.prefetch_cell(i, k);
+        let patch = k.wrapping_mul(mu - 1).wrapping_add(i);
+        prefetch_ptr(self.factors.as_ptr().wrapping_add(patch));
     }
 
     /// [`Self::pdf_in_patch`] for a block of patches and points: the patches'
@@ -297,16 +322,17 @@ impl BilinearDistribution2D {
         points: &[[f64; 2]; N],
         out: &mut [f32; N],
     ) {
-        let mut corners = [[0.0f64; 4]; N];
-        let mut sides = [[0.0f64; 4]; N];
-        let mut probability = [0.0f64; N];
-        for (j, &[i, k]) in patches.iter().enumerate() {
-            corners[j] = self.corners(i, k);
-            sides[j] = self.sides(i, k);
-            probability[j] = self.patches.cell_probability(i, k);
+        let mu = self.u.nodes.len();
+        let mut corners = [[0.0f32; 4]; N];
+        let mut weights = [[[0.0f32; 2]; 2]; N];
+        let mut factors = [0.0f32; N];
+        for (j, (&[i, k], &[u, v])) in patches.iter().zip(points).enumerate() {
+            corners[j] = corners32(&self.values, mu, i, k);
+            weights[j] = [self.u.weights(i, u), self.v.weights(k, v)];
+            factors[j] = self.factors[k * (mu - 1) + i];
         }
         for j in 0..N {
-            out[j] = pdf_from_corners(corners[j], sides[j], probability[j], points[j]);
+            out[j] = pdf_from_weights(corners[j], weights[j], factors[j], self.scale);
         }
     }
 
@@ -339,12 +365,13 @@ impl BilinearDistribution2D {
     }
 
     /// [`Self::pdf`] at `N` points `(u[j], v[j])` in the patches `[i[j], k[j]]`
-    /// that [`Self::centred_patches`] found for them, as loops the compiler turns
-    /// into vector gathers and f64 vector arithmetic: the same operations as the
-    /// single call, so bit for bit its values.
+    /// that [`Self::centred_patches`] found for them, on a layout the light builds
+    /// (`cells` and `node_rows` as in [`CentredTables`]), as loops the compiler
+    /// turns into vector gathers and vector arithmetic: the same operations as
+    /// the single call, so bit for bit its values.
     ///
     /// # Panics
-    /// When a patch is outside the grid.
+    /// When a patch is outside the grid, or the nodes are not such a layout.
     #[inline(always)]
     pub(crate) fn pdf_in_centred_patches<const N: usize>(
         &self,
@@ -357,32 +384,38 @@ impl BilinearDistribution2D {
             i.iter().all(|&i| (i as usize) + 1 < mu) && k.iter().all(|&k| (k as usize) + 1 < mv),
             "patch outside the grid"
         );
-        let (values, un, vn) = (&self.values, &self.u.nodes, &self.v.nodes);
+        let (cells, rows) = (self.u.cells, self.v.locating_count());
+        let node_rows = self.v.rows > 0.0;
+        assert!(cells > 0.0 && rows > 0.0, "not a layout the light builds");
+        let mut weights = [[[0.0f32; 2]; 2]; N];
+        for j in 0..N {
+            let (x, y) = (unit_closed(u[j]), unit_closed(v[j]));
+            let wv = if node_rows {
+                row_weights(y, rows, k[j] as f64)
+            } else {
+                centred_weights(y, rows, k[j] as f64)
+            };
+            weights[j] = [centred_weights(x, cells, i[j] as f64), wv];
+        }
+        let (values, factors) = (&self.values, &self.factors);
         let mut out = [0.0f32; N];
-        let probability = self.patches.cell_probabilities_in_grid(i, k);
         for j in 0..N {
             let (i, k) = (i[j] as usize, k[j] as usize);
             let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
             // SAFETY: i + 1 < mu and k + 1 < mv (checked above), so every index is
-            // below mu mv = values.len(), and the nodes' below mu and mv.
-            let (corners, sides) = unsafe {
+            // below mu mv = values.len(), and the patch's below (mu - 1)(mv - 1).
+            let (corners, factor) = unsafe {
                 (
                     [
-                        *values.get_unchecked(top) as f64,
-                        *values.get_unchecked(top + 1) as f64,
-                        *values.get_unchecked(bottom) as f64,
-                        *values.get_unchecked(bottom + 1) as f64,
+                        *values.get_unchecked(top),
+                        *values.get_unchecked(top + 1),
+                        *values.get_unchecked(bottom),
+                        *values.get_unchecked(bottom + 1),
                     ],
-                    [
-                        *un.get_unchecked(i),
-                        *un.get_unchecked(i + 1),
-                        *vn.get_unchecked(k),
-                        *vn.get_unchecked(k + 1),
-                    ],
+                    *factors.get_unchecked(k * (mu - 1) + i),
                 )
             };
-            let point = [unit_closed(u[j]), unit_closed(v[j])];
-            out[j] = pdf_from_corners(corners, sides, probability[j], point);
+            out[j] = pdf_from_weights(corners, weights[j], factor, self.scale);
         }
         out
     }
@@ -451,6 +484,45 @@ impl BilinearDistribution2D {
     /// When the slices differ in length or are longer than [`STAGED_BLOCK`].
     #[inline(always)]
     pub fn sample_block(&self, xi: &[[f32; 2]], out: &mut [Sample2D], hint: impl Fn([f32; 2])) {
+        self.sample_block_with::<true>(xi, out, hint);
+    }
+
+    /// [`Self::sample_continuous`] without the density: the same point and patch,
+    /// with pdf 1 (0 for a function with no mass), for callers that evaluate the
+    /// density elsewhere (the light, at the returned direction).
+    #[inline]
+    pub(crate) fn sample_point(&self, xi: [f32; 2]) -> Sample2D {
+        if self.integral <= 0.0 {
+            return self.sample_black(xi);
+        }
+        let (uv, cell) = self.place_point(self.patches.sample_cell(xi));
+        Sample2D { uv, pdf: 1.0, cell }
+    }
+
+    /// [`Self::sample_block`] of [`Self::sample_point`]s.
+    ///
+    /// # Panics
+    /// As [`Self::sample_block`].
+    #[inline(always)]
+    pub(crate) fn sample_point_block(
+        &self,
+        xi: &[[f32; 2]],
+        out: &mut [Sample2D],
+        hint: impl Fn([f32; 2]),
+    ) {
+        self.sample_block_with::<false>(xi, out, hint);
+    }
+
+    /// [`Self::sample_block`], with the densities where `PDF` (else pdf 1, as
+    /// [`Self::sample_point`]).
+    #[inline(always)]
+    fn sample_block_with<const PDF: bool>(
+        &self,
+        xi: &[[f32; 2]],
+        out: &mut [Sample2D],
+        hint: impl Fn([f32; 2]),
+    ) {
+        assert_eq!(xi.len(), out.len(), "one sample per xi");
         if self.integral <= 0.0 {
             for (o, &x) in out.iter_mut().zip(xi) {
                 *o = self.sample_black(x);
@@ -467,27 +539,51 @@ impl BilinearDistribution2D {
             let [i, k] = c.cell;
             hint([self.u.nodes[i] as f32, self.v.nodes[k] as f32]);
         }
-        // The corners, then both coordinates in the patch for all lanes at once
-        // (in vector lanes: two square roots and two divisions each), then the
-        // points and pdfs.
+        // The corners and sides, then both coordinates in the patch for all
+        // lanes at once (in vector lanes: two square roots and two divisions
+        // each), then the points rounded to f32 in lanes, then the few that
+        // rounding carried out of their patch one at a time.
         let mut corners = [[0.0f64; STAGED_BLOCK]; 4];
+        let mut sides = [[0.0f64; STAGED_BLOCK]; 4];
         let mut offsets = [[0.0f64; STAGED_BLOCK]; 2];
         for (j, c) in cells.iter().enumerate() {
-            let q = self.corners(c.cell[0], c.cell[1]);
+            let [i, k] = c.cell;
+            let (q, e) = (self.corners(i, k), self.sides(i, k));
             for m in 0..4 {
                 corners[m][j] = q[m];
+                sides[m][j] = e[m];
             }
             (offsets[0][j], offsets[1][j]) = (c.offset[0], c.offset[1]);
         }
         let [a, b, cc, d] = &corners;
+        let [u0, u1, v0, v1] = &sides;
         let mut local = [[0.0f64; STAGED_BLOCK]; 2];
+        let mut point = [[0.0f32; STAGED_BLOCK]; 2];
         for j in 0..STAGED_BLOCK {
             let y = sample_linear(offsets[1][j], a[j] + b[j], cc[j] + d[j]);
             let x = sample_linear(offsets[0][j], lerp(y, a[j], cc[j]), lerp(y, b[j], d[j]));
             (local[0][j], local[1][j]) = (x, y);
+            point[0][j] = round_below_one(lerp(x, u0[j], u1[j]));
+            point[1][j] = round_below_one(lerp(y, v0[j], v1[j]));
         }
-        for (j, (o, &c)) in out.iter_mut().zip(cells.iter()).enumerate() {
-            *o = self.point_at(c, [local[0][j], local[1][j]]);
+        let (last_u, last_v) = (self.u.nodes.len() - 2, self.v.nodes.len() - 2);
+        for (j, (o, c)) in out.iter_mut().zip(cells.iter()).enumerate() {
+            let [i, k] = c.cell;
+            // Most points stay in their patch when rounded; the others are
+            // settled one at a time by `point_in_patch`.
+            let settled = kept_in_patch(point[0][j], u0[j], u1[j], i == last_u)
+                && kept_in_patch(point[1][j], v0[j], v1[j], k == last_v);
+            let (uv, cell) = if settled {
+                ([point[0][j], point[1][j]], c.cell)
+            } else {
+                self.point_at(c.cell, [local[0][j], local[1][j]])
+            };
+            let pdf = if PDF {
+                self.patch_pdf(cell[0], cell[1], uv[0] as f64, uv[1] as f64)
+            } else {
+                1.0
+            };
+            *o = Sample2D { uv, pdf, cell };
         }
     }
 
@@ -508,33 +604,30 @@ impl BilinearDistribution2D {
     /// linear marginal, then `x` from the linear conditional at `y`.
     #[inline(always)]
     fn place(&self, c: CellSample) -> Sample2D {
-        let [i, k] = c.cell;
-        let [a, b, cc, d] = self.corners(i, k);
-        let y = sample_linear(c.offset[1], a + b, cc + d);
-        let x = sample_linear(c.offset[0], lerp(y, a, cc), lerp(y, b, d));
-        self.point_at(c, [x, y])
-    }
-
-    /// The sample at local coordinates `[x, y]` of patch `c.cell`.
-    #[inline(always)]
-    fn point_at(&self, c: CellSample, [x, y]: [f64; 2]) -> Sample2D {
-        let [i, k] = c.cell;
-        let [u0, u1, v0, v1] = self.sides(i, k);
+        let (uv, cell) = self.place_point(c);
         // The pdf is evaluated at the rounded point in the patch `pdf()` finds for
         // it, so the two agree to the bit.
+        let pdf = self.patch_pdf(cell[0], cell[1], uv[0] as f64, uv[1] as f64);
+        Sample2D { uv, pdf, cell }
+    }
+
+    /// [`Self::place`] without the density: the point and its patch.
+    #[inline(always)]
+    fn place_point(&self, c: CellSample) -> ([f32; 2], [usize; 2]) {
+        let [a, b, cc, d] = self.corners(c.cell[0], c.cell[1]);
+        let y = sample_linear(c.offset[1], a + b, cc + d);
+        let x = sample_linear(c.offset[0], lerp(y, a, cc), lerp(y, b, d));
+        self.point_at(c.cell, [x, y])
+    }
+
+    /// The point at local coordinates `[x, y]` of patch `[i, k]`, rounded to f32,
+    /// and the patch [`Self::pdf`] finds for it.
+    #[inline(always)]
+    fn point_at(&self, [i, k]: [usize; 2], [x, y]: [f64; 2]) -> ([f32; 2], [usize; 2]) {
+        let [u0, u1, v0, v1] = self.sides(i, k);
         let (u, iu) = self.u.point_in_patch(i, lerp(x, u0, u1));
         let (v, iv) = self.v.point_in_patch(k, lerp(y, v0, v1));
-        let pdf = if [iu, iv] == c.cell {
-            let probability = probability_of_widths(c.widths);
-            self.patch_pdf_given(iu, iv, u as f64, v as f64, probability)
-        } else {
-            self.patch_pdf(iu, iv, u as f64, v as f64)
-        };
-        Sample2D {
-            uv: [u, v],
-            pdf,
-            cell: [iu, iv],
-        }
+        ([u, v], [iu, iv])
     }
 
     /// The sample-space point that [`Self::sample_continuous`] maps to `uv`.
@@ -554,30 +647,94 @@ impl BilinearDistribution2D {
     }
 }
 
-/// The density at `[u, v]` in a patch with corners `[f_00, f_10, f_01, f_11]`,
-/// sides `[u0, u1, v0, v1]` and probability `P`: `P · B(u, v) / M`, 0 for a patch
-/// of no mass. With the distances of the point to the sides, `Δu Δv B` is the
-/// corners weighted by the opposite distances and `M = Δu Δv Σf / 4`, so the
-/// density is one division: `4 P (Δu Δv B) / ((Δu Δv)² Σf)`. Selects only, so a
-/// loop over lanes vectorizes.
+/// The density in a patch with corners `[f_00, f_10, f_01, f_11]` at a point
+/// whose distances to the patch's sides, in units of `1/c` along each axis, are
+/// `[[left, right], [above, below]]`: the corners weighted by the opposite
+/// distances are `c_u c_v Δu Δv B`, and the patch's `factor` (`F_ik` of
+/// [`BilinearDistribution2D`], over `scale`) turns them into
+/// `P_ik B / M_ik = 4 P_ik Δu Δv B / (Δu² Δv² Σf)`. All in `f32`, in one order,
+/// with selects only, so that a loop over lanes vectorizes and every path (single
+/// calls, lanes, hand-written kernels) gives the same bits.
 #[inline(always)]
-fn pdf_from_corners(
-    [a, b, c, d]: [f64; 4],
-    [u0, u1, v0, v1]: [f64; 4],
-    probability: f64,
-    [u, v]: [f64; 2],
+fn pdf_from_weights(
+    [a, b, c, d]: [f32; 4],
+    [[left, right], [above, below]]: [[f32; 2]; 2],
+    factor: f32,
+    scale: f32,
 ) -> f32 {
-    let (left, right) = ((u - u0).max(0.0), (u1 - u).max(0.0));
-    let (top, bottom) = ((v - v0).max(0.0), (v1 - v).max(0.0));
-    let weighted = bottom * (right * a + left * b) + top * (right * c + left * d);
-    let area = (u1 - u0) * (v1 - v0);
-    let denominator = area * area * (a + b + c + d);
-    let pdf = (4.0 * probability * weighted / denominator) as f32;
-    if denominator > 0.0 {
-        pdf
-    } else {
-        0.0
+    let weighted = below * (right * a + left * b) + above * (right * c + left * d);
+    factor * (weighted * scale)
+}
+
+/// The factors `F_ik = 4 P_ik / (c Δu² Δv² Σf)` of [`BilinearDistribution2D`]
+/// (`c`: the two axes' counts times the scale), row by row in loops the compiler
+/// vectorizes; 0 for a patch of no mass or probability. A factor beyond `f32`
+/// (a patch whose probability the CDF's `2⁻⁶⁴` quantum raised far above its
+/// mass, at a dynamic range of the values beyond `f32`'s) is kept finite.
+fn patch_factors(
+    values: &[f32],
+    [u_nodes, v_nodes]: [&[f64]; 2],
+    patches: &Distribution2D,
+    c: f64,
+) -> Vec<f32> {
+    let (mu, mv) = (u_nodes.len(), v_nodes.len());
+    let widths: Vec<f64> = u_nodes.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut factors = vec![0.0f32; (mu - 1) * (mv - 1)];
+    for (k, row) in factors.chunks_mut(mu - 1).enumerate() {
+        let (cdf, marginal) = patches.row_widths(k);
+        let height = v_nodes[k + 1] - v_nodes[k];
+        let row_scale = 4.0 * (marginal as f64 / CDF_ONE as f64) / (c * height * height);
+        let (top, bottom) = (
+            &values[k * mu..(k + 1) * mu],
+            &values[(k + 1) * mu..(k + 2) * mu],
+        );
+        for (i, f) in row.iter_mut().enumerate() {
+            let sum = top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64;
+            let width = (cdf[i + 1] - cdf[i]) as f64 / CDF_ONE as f64;
+            let denominator = widths[i] * widths[i] * sum;
+            let factor = (row_scale * width / denominator).min(f32::MAX as f64) as f32;
+            *f = if denominator > 0.0 && width > 0.0 && row_scale > 0.0 {
+                factor
+            } else {
+                0.0
+            };
+        }
     }
+    factors
+}
+
+/// The power of two [`pdf_from_weights`] scales the weighted corners by: 1 for an
+/// integral in `[2⁻⁶⁴, 2⁶⁴]`, else about its reciprocal (so that the factors,
+/// about `1 / (I · scale)`, stay near 1).
+fn factor_scale(integral: f64) -> f32 {
+    if integral > 0.0 && !(2f64.powi(-64)..=2f64.powi(64)).contains(&integral) {
+        let e = (-integral.log2().round()).clamp(-126.0, 126.0) as i32;
+        2f32.powi(e)
+    } else {
+        1.0
+    }
+}
+
+/// `[x n − lo, hi − x n]` for `x ∈ [0, 1]` in patch `i` of the texel-centre layout
+/// over `n` texels, whose sides in texel units are `lo = max(i − ½, 0)` and
+/// `hi = min(i + ½, n)`: exact in `f64` (for `n < 2²⁸` the product of an `f32`
+/// and `n` is), so rounded once, to `f32`. Negative distances (a point outside
+/// the patch) count as 0.
+#[inline(always)]
+fn centred_weights(x: f64, n: f64, i: f64) -> [f32; 2] {
+    let at = x * n;
+    let (lo, hi) = ((i - 0.5).max(0.0), (i + 0.5).min(n));
+    [(at - lo).max(0.0) as f32, (hi - at).max(0.0) as f32]
+}
+
+/// [`centred_weights`] for the node-row layout over `m` row intervals, whose
+/// patch `i` (from 1 to `m`; 0 and `m + 1` have no width) runs from `i − 1` to
+/// `i` in row units.
+#[inline(always)]
+fn row_weights(x: f64, m: f64, i: f64) -> [f32; 2] {
+    let at = x * m;
+    let (lo, hi) = ((i - 1.0).max(0.0).min(m), i.min(m));
+    [(at - lo).max(0.0) as f32, (hi - at).max(0.0) as f32]
 }
 
 /// Checks one axis's node positions: from exactly 0 to exactly 1, never
@@ -693,6 +850,21 @@ fn corners(values: &[f32], mu: usize, i: usize, k: usize) -> [f64; 4] {
     }
 }
 
+/// [`corners`] as stored, in `f32`.
+///
+/// # Panics
+/// When the patch is outside the grid.
+#[inline(always)]
+fn corners32(values: &[f32], mu: usize, i: usize, k: usize) -> [f32; 4] {
+    let (top, bottom) = (k * mu + i, (k + 1) * mu + i);
+    [
+        values[top],
+        values[top + 1],
+        values[bottom],
+        values[bottom + 1],
+    ]
+}
+
 /// One axis of the node grid: the node positions, their lookup [`guide`], and
 /// whether they are the texel-centre layout.
 #[derive(Debug, Clone, PartialEq)]
@@ -716,6 +888,35 @@ impl Axis {
             guide: guide(nodes),
             cells: centred_cells(nodes),
             rows: node_rows(nodes),
+        }
+    }
+
+    /// How many of the units a point's distances to its patch's sides are
+    /// measured in span the axis ([`Self::weights`]): `n` for the texel-centre
+    /// layout, `m` for the node rows, else the number of patches.
+    fn count(&self) -> f64 {
+        if self.cells > 0.0 {
+            self.cells
+        } else if self.rows > 0.0 {
+            self.rows
+        } else {
+            (self.nodes.len() - 1) as f64
+        }
+    }
+
+    /// The distances `[x − start, end − x]` of `x ∈ [0, 1]` to the sides of patch
+    /// `i`, in units of `1 / count` and in `f32` (0 where negative): exactly
+    /// rounded for the light's layouts ([`centred_weights`], [`row_weights`]).
+    #[inline(always)]
+    fn weights(&self, i: usize, x: f64) -> [f32; 2] {
+        if self.cells > 0.0 {
+            centred_weights(x, self.cells, i as f64)
+        } else if self.rows > 0.0 {
+            row_weights(x, self.rows, i as f64)
+        } else {
+            let [a, b] = self.side(i);
+            let c = self.count();
+            [((x - a) * c).max(0.0) as f32, ((b - x) * c).max(0.0) as f32]
         }
     }
 
@@ -754,7 +955,7 @@ impl Axis {
     fn point_in_patch(&self, i: usize, x: f64) -> (f32, usize) {
         let nodes = &self.nodes;
         let last = nodes.len() - 2;
-        let mut y = (x as f32).min(ONE_MINUS_EPSILON);
+        let mut y = round_below_one(x);
         for _ in 0..4 {
             let yd = y as f64;
             if i < last && yd >= nodes[i + 1] && y > 0.0 {
@@ -817,6 +1018,21 @@ fn locate_patch(nodes: &[f64], guide: &[u32], [cells, rows]: [f64; 2], x: f64) -
     } else {
         guided_patch(nodes, guide, x)
     }
+}
+
+/// `x` rounded to `f32` and kept below 1: where [`Axis::point_in_patch`] starts.
+#[inline(always)]
+fn round_below_one(x: f64) -> f32 {
+    (x as f32).min(ONE_MINUS_EPSILON)
+}
+
+/// Whether [`Axis::point_in_patch`]'s first pass keeps `y` (from
+/// [`round_below_one`]) in the patch `[start, end]` (`last`: the axis's last
+/// patch, which keeps its end).
+#[inline(always)]
+fn kept_in_patch(y: f32, start: f64, end: f64, last: bool) -> bool {
+    let yd = y as f64;
+    !(!last && yd >= end && y > 0.0) && yd >= start
 }
 
 /// `(x - a) / (b - a)` clamped to `[0, 1]`.
@@ -1153,6 +1369,58 @@ mod tests {
             .map(|r| rect_probability(&d, r[0], r[1], r[2], r[3]) * 1.01)
             .sum();
         assert!((total - 1.0).abs() > 1e-6);
+    }
+
+    #[test]
+    fn blocks_and_points_equal_single_samples() {
+        // Random nodes (with repeats), the texel-centre layout and the node
+        // rows; ξ on a grid fine enough that some points round onto a patch
+        // edge and are settled one at a time.
+        let mut rng = SplitMix64::new(9);
+        let image: Vec<f32> = (0..7 * 5).map(|_| rng.next_f32() + 0.05).collect();
+        let (values, u, v) = texel_centre_layout(&image, 7, 5);
+        let mut densities = vec![
+            random_density(&mut rng, 5, 4),
+            random_density(&mut rng, 17, 9),
+            BilinearDistribution2D::new(&values, &u, &v),
+        ];
+        let rows = [0.0, 0.0, 0.25, 0.5, 0.75, 1.0, 1.0];
+        densities.push(BilinearDistribution2D::new(&values, &u, &rows));
+        assert_eq!(densities[2].image_cells(), Some(([7, 5], false)));
+        assert_eq!(densities[3].image_cells(), Some(([7, 5], true)));
+        let near = |x: f32| {
+            [
+                x,
+                f32::from_bits(x.to_bits().saturating_sub(1)),
+                x.next_up(),
+            ]
+        };
+        for d in &densities {
+            // ξ that lands on the nodes (the inverse of each node), and beside.
+            let mut xi: Vec<[f32; 2]> = Vec::new();
+            for &u in &d.u.nodes {
+                for &v in &d.v.nodes {
+                    let [a, b] = d.invert([u as f32, v as f32]);
+                    for a in near(a) {
+                        xi.extend(near(b).map(|b| [a, b]));
+                    }
+                }
+            }
+            xi.extend((0..4096).map(|k| [(k % 64) as f32 / 64.0, (k / 64) as f32 / 64.0]));
+            xi.extend((0..4096).map(|k| xi_2d(3, k)));
+            for xi in xi.chunks(STAGED_BLOCK) {
+                let mut block = vec![Sample2D::default(); xi.len()];
+                let mut points = block.clone();
+                d.sample_block(xi, &mut block, |_| {});
+                d.sample_point_block(xi, &mut points, |_| {});
+                for ((x, b), p) in xi.iter().zip(&block).zip(&points) {
+                    let one = d.sample_continuous(*x);
+                    assert_eq!(*b, one, "{x:?}");
+                    assert_eq!(*p, d.sample_point(*x), "{x:?}");
+                    assert_eq!((p.uv, p.cell, p.pdf), (one.uv, one.cell, 1.0), "{x:?}");
+                }
+            }
+        }
     }
 
     #[test]

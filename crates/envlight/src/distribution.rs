@@ -815,13 +815,6 @@ pub struct Sample2D {
     pub cell: [usize; 2],
 }
 
-/// The probability of a cell of a [`Distribution2D`] of CDF widths `[wu, wv]`:
-/// `wu wv / CDF_ONE²`.
-#[inline(always)]
-pub(crate) fn probability_of_widths([wu, wv]: [u32; 2]) -> f64 {
-    (wu as f64 * (1.0 / CDF_ONE as f64)) * (wv as f64 * (1.0 / CDF_ONE as f64))
-}
-
 /// A cell picked by a [`Distribution2D`], before a point is placed in it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct CellSample {
@@ -1020,6 +1013,21 @@ impl Distribution2D {
         self.pdf_of_widths(wu, wv)
     }
 
+    /// Row `iv`'s conditional CDF (`nu + 1` entries) and its width in the
+    /// marginal CDF: each cell's probability is `(cdf[iu + 1] − cdf[iu]) ·
+    /// width`, in units of `CDF_ONE⁻²`.
+    ///
+    /// # Panics
+    /// When `iv >= nv`.
+    pub(crate) fn row_widths(&self, iv: usize) -> (&[u32], u32) {
+        let stride = self.nu + 1;
+        let marginal = &self.marginal.cdf;
+        (
+            &self.conditional_cdf[iv * stride..(iv + 1) * stride],
+            marginal[iv + 1] - marginal[iv],
+        )
+    }
+
     /// The CDF widths `[width_u, width_v]` of a cell in the grid, read without
     /// bounds checks (see [`Self::cell_pdf_in_grid`]).
     #[inline(always)]
@@ -1148,50 +1156,6 @@ impl Distribution2D {
             offset: [fu, fv],
             widths: [wu, wv],
         }
-    }
-
-    /// Probability of picking cell `[iu, iv]`: `width_u · width_v / CDF_ONE²`.
-    ///
-    /// # Panics
-    /// When the cell is outside the grid.
-    #[inline(always)]
-    pub(crate) fn cell_probability(&self, iu: usize, iv: usize) -> f64 {
-        assert!(iu < self.nu && iv < self.nv, "cell outside the grid");
-        probability_of_widths(self.cell_widths_in_grid(iu, iv))
-    }
-
-    /// [`Self::cell_probability`] of `N` cells in the grid (`iu[j] < nu`,
-    /// `iv[j] < nv`), in vector lanes, bit for bit.
-    ///
-    /// # Panics
-    /// When a cell is outside the grid.
-    #[inline(always)]
-    pub(crate) fn cell_probabilities_in_grid<const N: usize>(
-        &self,
-        iu: &[u32; N],
-        iv: &[u32; N],
-    ) -> [f64; N] {
-        assert!(
-            iu.iter().all(|&u| (u as usize) < self.nu)
-                && iv.iter().all(|&v| (v as usize) < self.nv),
-            "cell outside the grid"
-        );
-        let (cdf, marginal) = (&self.conditional_cdf, &self.marginal.cdf);
-        let stride = self.nu + 1;
-        let mut out = [0.0f64; N];
-        for j in 0..N {
-            let (u, v) = (iu[j] as usize, iv[j] as usize);
-            let at = v * stride + u;
-            // SAFETY: as in `cell_widths_in_grid`, for u < nu and v < nv.
-            let widths = unsafe {
-                [
-                    cdf.get_unchecked(at + 1) - cdf.get_unchecked(at),
-                    marginal.get_unchecked(v + 1) - marginal.get_unchecked(v),
-                ]
-            };
-            out[j] = probability_of_widths(widths);
-        }
-        out
     }
 
     /// The `ξ` that [`Self::sample_cell`] maps to cell `cell` with `offset`: the

@@ -15,7 +15,7 @@
 
 use super::{EnvironmentLight, LightSample, Mapping, Planar};
 use crate::bilinear::{BilinearDistribution2D, CentredTables};
-use crate::distribution::{CDF_ONE, ONE_MINUS_EPSILON};
+use crate::distribution::ONE_MINUS_EPSILON;
 use crate::image::Lookup;
 use crate::mapping::EQUIRECT_JACOBIAN;
 use crate::math::{len_f32, prefetch_ptr, Vec3, ATAN_PI_Q, TAN_PI_8};
@@ -123,15 +123,14 @@ fn bilinear_tables<'a>(
     d: &'a BilinearDistribution2D,
 ) -> Option<CentredTables<'a>> {
     d.centred_tables().filter(|t| {
-        light.options.mapping == Mapping::Equirectangular
-            && t.values.len() <= i32::MAX as usize
-            && t.patches.conditional_cdf.len() <= i32::MAX as usize
+        light.options.mapping == Mapping::Equirectangular && t.values.len() <= i32::MAX as usize
     })
 }
 
 /// The bilinear density's pdf at each direction (`pdf_in_centred_patches` over
-/// the Jacobian, in f64 as there, eight lanes at a time); `false` (and nothing
-/// written) where [`bilinear_tables`] does not hold.
+/// the Jacobian: the patches and the distances to their sides in f64, eight
+/// lanes at a time, the rest in f32 on 16); `false` (and nothing written) where
+/// [`bilinear_tables`] does not hold.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
 fn bilinear_pdfs(
     light: &EnvironmentLight,
@@ -143,140 +142,144 @@ fn bilinear_pdfs(
         return false;
     };
     let frame = Frame::of(light);
-    let (mu, mv) = (t.u_nodes.len(), t.v_nodes.len());
+    let mu = t.mu;
     let row = _mm256_set1_epi32(mu as i32);
+    let patch_row = _mm256_set1_epi32(mu as i32 - 1);
     let one = _mm256_set1_epi32(1);
     // Patches are within [0, mu - 2] × [0, mv - 2] by construction; the clamps
     // keep the gathers inside the tables whatever happens.
+    let mv = t.values.len() / mu;
     let (last_i, last_k) = (
         _mm256_set1_epi32(mu as i32 - 2),
         _mm256_set1_epi32(mv as i32 - 2),
     );
-    let stride = _mm256_set1_epi32(t.patches.nu as i32 + 1);
     let (cells_u, cells_v) = (_mm512_set1_pd(t.cells[0]), _mm512_set1_pd(t.cells[1]));
-    let (zero, one_f, half, four) = (
+    let (zero, one_f, half) = (
         _mm512_setzero_pd(),
         _mm512_set1_pd(1.0),
         _mm512_set1_pd(0.5),
-        _mm512_set1_pd(4.0),
     );
-    let cdf_unit = _mm512_set1_pd(1.0 / CDF_ONE as f64);
-    // (Node rows along v are read: their `(k − 1)/m` is not a product.)
-    let computed = [true, !t.node_rows];
-    let inv_cells = [0, 1].map(|a| {
-        let n = t.cells[a] as u64;
-        (computed[a] && n.is_power_of_two()).then(|| _mm512_set1_pd(1.0 / n as f64))
-    });
     let node_rows = t.node_rows;
     let last_row = _mm256_set1_epi32(t.cells[1] as i32 - 1);
     let infinity = _mm512_set1_ps(f32::INFINITY);
-    let (values, un, vn) = (t.values.as_ptr(), t.u_nodes.as_ptr(), t.v_nodes.as_ptr());
-    let (cdf, marginal) = (
-        t.patches.conditional_cdf.as_ptr(),
-        t.patches.marginal_cdf.as_ptr(),
-    );
+    let scale = _mm512_set1_ps(t.scale);
+    let (values, factors) = (t.values.as_ptr(), t.factors.as_ptr());
+    let (even, odd) = (indices(&EVEN), indices(&ODD));
     // `unit_closed`: x in [0, 1] as f64 (0 for NaN). minpd gives 1 for a NaN.
     let unit_closed = |x: __m256| {
         let y = _mm512_min_pd(_mm512_cvtps_pd(x), one_f);
         _mm512_maskz_mov_pd(_mm256_cmp_ps_mask::<_CMP_GT_OQ>(x, _mm256_setzero_ps()), y)
     };
-    // `pdf_in_centred_patches` at eight points (`u`, `v` in f32).
-    let planar_pdfs = |u: __m256, v: __m256| {
+    // `[at − lo, hi − at]` clamped at 0, rounded to f32 (`centred_weights`,
+    // `row_weights`).
+    let distances = |at: __m512d, lo: __m512d, hi: __m512d| {
+        [
+            _mm512_cvtpd_ps(_mm512_max_pd(_mm512_sub_pd(at, lo), zero)),
+            _mm512_cvtpd_ps(_mm512_max_pd(_mm512_sub_pd(hi, at), zero)),
+        ]
+    };
+    // `centred_weights` of the point `at = x n` in patch `i` (as f64).
+    let centred = |at: __m512d, n: __m512d, i: __m512d| {
+        let lo = _mm512_max_pd(_mm512_sub_pd(i, half), zero);
+        let hi = _mm512_min_pd(_mm512_add_pd(i, half), n);
+        distances(at, lo, hi)
+    };
+    // `centred_patches` and the distances to the patches' sides at eight
+    // points (`u`, `v` in f32): the patches' first node values, their factors'
+    // indices and `[left, right, above, below]`.
+    let patches = |u: __m256, v: __m256| {
         let (u, v) = (unit_closed(u), unit_closed(v));
-        let i = _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(u, cells_u), half));
-        // `centred_patches`: along v the texel centres' ⌊v h + ½⌋, or the node
-        // rows' 1 + min(⌊v m⌋, m − 1).
+        let (x, y) = (_mm512_mul_pd(u, cells_u), _mm512_mul_pd(v, cells_v));
+        let i = _mm256_min_epu32(_mm512_cvttpd_epu32(_mm512_add_pd(x, half)), last_i);
+        // Along v the texel centres' ⌊v h + ½⌋, or the node rows'
+        // 1 + min(⌊v m⌋, m − 1).
         let k = if node_rows {
-            let below = _mm512_cvttpd_epu32(_mm512_mul_pd(v, cells_v));
+            let below = _mm512_cvttpd_epu32(y);
             _mm256_add_epi32(_mm256_min_epu32(below, last_row), one)
         } else {
-            _mm512_cvttpd_epu32(_mm512_add_pd(_mm512_mul_pd(v, cells_v), half))
+            _mm512_cvttpd_epu32(_mm512_add_pd(y, half))
         };
-        let (i, k) = (_mm256_min_epu32(i, last_i), _mm256_min_epu32(k, last_k));
+        let k = _mm256_min_epu32(k, last_k);
+        let [left, right] = centred(x, cells_u, _mm512_cvtepi32_pd(i));
+        let fk = _mm512_cvtepi32_pd(k);
+        let [above, below] = if node_rows {
+            let lo = _mm512_min_pd(_mm512_max_pd(_mm512_sub_pd(fk, one_f), zero), cells_v);
+            distances(y, lo, _mm512_min_pd(fk, cells_v))
+        } else {
+            centred(y, cells_v, fk)
+        };
         let top = _mm256_add_epi32(_mm256_mullo_epi32(k, row), i);
-        let bottom = _mm256_add_epi32(top, row);
-        let at = _mm256_add_epi32(_mm256_mullo_epi32(k, stride), i);
-        // SAFETY: i <= mu - 2 and k <= mv - 2, so the corners are inside the
-        // mu mv values, the sides inside the nodes, and the patch's CDF entries
-        // inside the patch distribution's tables (whose grid is (mu - 1) ×
-        // (mv - 1)); every index fits an i32 (`bilinear_tables`).
-        // Each pair of neighbours (a row's two corners, a cell's two CDF
-        // entries) is one 64-bit gather, split into its low and high halves.
-        // SAFETY: i <= mu - 2 and k <= mv - 2, so both corners of each row are
-        // inside the mu mv values, the sides inside the nodes, and the patch's
-        // CDF entries inside the patch distribution's tables (whose grid is
-        // (mu - 1) × (mv - 1)); every index fits an i32 (`bilinear_tables`).
-        let pair = |p: *const u32, at: __m256i| unsafe {
-            let both = _mm512_i32gather_epi64::<4>(at, p.cast());
-            [
-                _mm512_cvtepi64_epi32(both),
-                _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(both)),
-            ]
-        };
-        let values_pair =
-            |at: __m256i| pair(values.cast(), at).map(|v| _mm512_cvtps_pd(_mm256_castsi256_ps(v)));
-        let [a, b] = values_pair(top);
-        let [c, d] = values_pair(bottom);
-        // A node `(m - ½) / n` (clamped to [0, 1] at the ends), computed where n
-        // is a power of two (then a product, exactly the stored quotient), else
-        // read.
-        let node = |p: *const f64, inv_n: Option<__m512d>, m: __m256i| match inv_n {
-            Some(inv_n) => {
-                let x = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi32_pd(m), half), inv_n);
-                _mm512_min_pd(_mm512_max_pd(x, zero), one_f)
-            }
-            // SAFETY: as above.
-            None => unsafe { _mm512_i32gather_pd::<8>(m, p.cast()) },
-        };
-        let sides = [
-            node(un, inv_cells[0], i),
-            node(un, inv_cells[0], _mm256_add_epi32(i, one)),
-            node(vn, inv_cells[1], k),
-            node(vn, inv_cells[1], _mm256_add_epi32(k, one)),
-        ];
-        let widths =
-            [pair(cdf, at), pair(marginal, k)].map(|[low, high]| _mm256_sub_epi32(high, low));
-        // `probability_of_widths`.
-        let probability = _mm512_mul_pd(
-            _mm512_mul_pd(_mm512_cvtepu32_pd(widths[0]), cdf_unit),
-            _mm512_mul_pd(_mm512_cvtepu32_pd(widths[1]), cdf_unit),
-        );
-        // `pdf_from_corners`.
-        let [u0, u1, v0, v1] = sides;
-        let left = _mm512_max_pd(_mm512_sub_pd(u, u0), zero);
-        let right = _mm512_max_pd(_mm512_sub_pd(u1, u), zero);
-        let above = _mm512_max_pd(_mm512_sub_pd(v, v0), zero);
-        let below = _mm512_max_pd(_mm512_sub_pd(v1, v), zero);
-        let weighted = _mm512_add_pd(
-            _mm512_mul_pd(
-                below,
-                _mm512_add_pd(_mm512_mul_pd(right, a), _mm512_mul_pd(left, b)),
-            ),
-            _mm512_mul_pd(
-                above,
-                _mm512_add_pd(_mm512_mul_pd(right, c), _mm512_mul_pd(left, d)),
-            ),
-        );
-        let area = _mm512_mul_pd(_mm512_sub_pd(u1, u0), _mm512_sub_pd(v1, v0));
-        let sum = _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(a, b), c), d);
-        let denominator = _mm512_mul_pd(_mm512_mul_pd(area, area), sum);
-        let pdf = _mm512_div_pd(
-            _mm512_mul_pd(_mm512_mul_pd(four, probability), weighted),
-            denominator,
-        );
-        let positive = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(denominator, zero);
-        _mm256_maskz_mov_ps(positive, _mm512_cvtpd_ps(pdf))
+        let patch = _mm256_add_epi32(_mm256_mullo_epi32(k, patch_row), i);
+        (top, patch, [left, right, above, below])
+    };
+    // Both halves' 8 lanes as one vector of 16.
+    let join = |lower: __m256, upper: __m256| {
+        _mm512_insertf32x8::<1>(_mm512_castps256_ps512(lower), upper)
+    };
+    let join_i = |lower: __m256i, upper: __m256i| {
+        _mm512_inserti32x8::<1>(_mm512_castsi256_si512(lower), upper)
+    };
+    // A row's two neighbouring node values at 16 patches (`first`: the left
+    // node's index, eight lanes per half), each pair one 64-bit gather, split
+    // into the left and right values.
+    // SAFETY (the gathers): i <= mu - 2 and k <= mv - 2, so both nodes of each
+    // patch's rows are inside the mu mv values and the patch inside the
+    // (mu - 1)(mv - 1) factors; every index fits an i32 (`bilinear_tables`).
+    let pairs = |first: [__m256i; 2]| unsafe {
+        let [lower, upper] =
+            first.map(|at| _mm512_castsi512_ps(_mm512_i32gather_epi64::<4>(at, values.cast())));
+        [
+            _mm512_permutex2var_ps(lower, even, upper),
+            _mm512_permutex2var_ps(lower, odd, upper),
+        ]
     };
     for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
         let [x, y, z] = load_directions(dirs);
         let (u, v, csc) = frame.to_uv(x, y, z);
-        let lower = planar_pdfs(_mm512_castps512_ps256(u), _mm512_castps512_ps256(v));
-        let upper = planar_pdfs(upper_half(u), upper_half(v));
-        let planar = _mm512_insertf32x8::<1>(_mm512_castps256_ps512(lower), upper);
+        let (top_l, patch_l, w_l) = patches(_mm512_castps512_ps256(u), _mm512_castps512_ps256(v));
+        let (top_u, patch_u, w_u) = patches(upper_half(u), upper_half(v));
+        let [left, right, above, below] = [0, 1, 2, 3].map(|m| join(w_l[m], w_u[m]));
+        let [a, b] = pairs([top_l, top_u]);
+        let [c, dd] = pairs([top_l, top_u].map(|t| _mm256_add_epi32(t, row)));
+        // SAFETY: as `pairs`.
+        let factor = unsafe { _mm512_i32gather_ps::<4>(join_i(patch_l, patch_u), factors.cast()) };
+        // `pdf_from_weights`.
+        let weighted = _mm512_add_ps(
+            _mm512_mul_ps(
+                below,
+                _mm512_add_ps(_mm512_mul_ps(right, a), _mm512_mul_ps(left, b)),
+            ),
+            _mm512_mul_ps(
+                above,
+                _mm512_add_ps(_mm512_mul_ps(right, c), _mm512_mul_ps(left, dd)),
+            ),
+        );
+        let planar = _mm512_mul_ps(factor, _mm512_mul_ps(weighted, scale));
         store_solid_angle(out, planar, csc, infinity);
     }
     true
 }
+
+/// The even and odd floats of two vectors of 16 (lanes `0..16` the first's,
+/// `16..32` the second's).
+const EVEN: [i32; 16] = {
+    let mut e = [0; 16];
+    let mut i = 0;
+    while i < 16 {
+        e[i] = 2 * i as i32;
+        i += 1;
+    }
+    e
+};
+const ODD: [i32; 16] = {
+    let mut o = [0; 16];
+    let mut i = 0;
+    while i < 16 {
+        o[i] = 2 * i as i32 + 1;
+        i += 1;
+    }
+    o
+};
 
 /// Lanes 8 to 15.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]

@@ -89,7 +89,7 @@ impl EnvironmentLight {
             out,
             Some(pdfs),
             #[inline(always)]
-            |xi, out| d.sample_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
+            |xi, out| d.sample_point_block(xi, out, |uv| self.image.prefetch(uv[0], uv[1])),
         )
     }
 

@@ -441,7 +441,7 @@ impl EnvironmentLight {
                 self.finish_sample(s, false)
             }
             Planar::Hierarchical(d) => self.finish_sample(d.sample_continuous(xi), false),
-            Planar::Bilinear(d) => self.finish_sample(d.sample_continuous(xi), true),
+            Planar::Bilinear(d) => self.finish_sample(d.sample_point(xi), true),
         }
     }
 
