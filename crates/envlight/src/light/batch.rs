@@ -843,6 +843,44 @@ mod tests {
     /// bit the single queries, for every density (tests/threads.rs covers the
     /// public calls too).
     #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn bilinear_pdfs_read_ahead_on_large_tables_equal_single_queries() {
+        // Tables beyond `PREFETCH_ABOVE` take the AVX-512 pdf kernel's other
+        // loop, each block finished one block later: the same values, also for
+        // a last block of each length below 16.
+        if !supports(VectorWidth::Avx512) {
+            eprintln!("skipped: this CPU has no AVX-512");
+            return;
+        }
+        let options = LightOptions {
+            density: Density::PiecewiseBilinear,
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(crate::builtin::sky(2048, 1024), options).unwrap();
+        let Planar::Bilinear(d) = &light.planar else {
+            panic!("a bilinear light");
+        };
+        let t = d.centred_tables().expect("the light's layout");
+        let bytes = std::mem::size_of_val(t.values) + std::mem::size_of_val(t.factors);
+        assert!(
+            bytes > super::super::avx512::PREFETCH_ABOVE,
+            "{bytes} bytes"
+        );
+        let mut dirs: Vec<Vec3> = (0..2_000u64)
+            .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(8, k)))
+            .collect();
+        dirs.extend([Vec3::new(0.0, 0.0, 1.0), Vec3::new(f32::NAN, 0.0, 1.0)]);
+        for n in (dirs.len() - 17)..=dirs.len() {
+            let mut pdfs = vec![0.0; n];
+            // SAFETY: the CPU has AVX-512 (checked above).
+            unsafe { (EnvironmentLight::pdf_chunk_wide().avx512)(&light, &dirs[..n], &mut pdfs) };
+            for (p, &d) in pdfs.iter().zip(&dirs) {
+                assert_eq!(p.to_bits(), light.pdf(d).to_bits(), "{n} {d:?}");
+            }
+        }
+    }
+
+    #[test]
     fn batch_kernels_at_every_width_equal_single_queries() {
         // A coarse sky, and one whose sun covers a few texels of long rows (the
         // sampling searches among many faint cells).
