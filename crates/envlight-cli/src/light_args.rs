@@ -45,7 +45,8 @@ pub struct LightArgs {
     /// The shape of the sampling density over the map. piecewise-constant, the
     /// default, is the smallest and cheapest; piecewise-bilinear follows the
     /// bilinear lookup (lower variance) for about 14 bytes per texel against 6
-    /// and a dearer pdf (up to 1.9x on a 4k map), and needs --sampler inversion.
+    /// and a dearer sample and pdf (up to 1.4x in batch), and needs --sampler
+    /// inversion.
     #[arg(long, value_name = "NAME", value_enum, default_value_t = DensityArg::PiecewiseConstant)]
     pub density: DensityArg,
 
