@@ -1424,6 +1424,40 @@ mod tests {
     }
 
     #[test]
+    fn pdf_does_not_depend_on_the_values_scale() {
+        // Integrals far outside [2⁻⁶⁴, 2⁶⁴] take a scale so that the factors stay
+        // in f32: the same density, to f32 rounding, and still exact for samples.
+        let mut rng = SplitMix64::new(12);
+        let values: Vec<f32> = (0..9 * 6)
+            .map(|n| {
+                if n % 7 == 3 {
+                    0.0
+                } else {
+                    0.5 + 1.5 * rng.next_f32()
+                }
+            })
+            .collect();
+        let (u, v) = (random_nodes(&mut rng, 9), random_nodes(&mut rng, 6));
+        let base = BilinearDistribution2D::new(&values, &u, &v);
+        // 1e-39: subnormal values, an integral whose reciprocal is beyond f32.
+        for k in [1e-39f32, 1e-20, 1e20, 1e30] {
+            let scaled: Vec<f32> = values.iter().map(|v| v * k).collect();
+            let d = BilinearDistribution2D::new(&scaled, &base.u.nodes, &base.v.nodes);
+            assert_ne!(d.integral(), base.integral());
+            for j in 0..2000 {
+                let xi = xi_2d(2, j);
+                let s = d.sample_continuous(xi);
+                assert_eq!(d.pdf(s.uv), s.pdf);
+                let t = base.pdf(s.uv);
+                assert!(
+                    s.pdf > 0.0 && close(s.pdf, t, 1e-5),
+                    "{k} {xi:?}: {s:?} {t}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn sample_pdf_and_invert_agree() {
         let mut rng = SplitMix64::new(4);
         for &(mu, mv) in &[(2, 2), (5, 4), (17, 9), (3, 40)] {
