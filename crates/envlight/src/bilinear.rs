@@ -38,8 +38,8 @@
 //! sampler does.)
 //!
 use crate::distribution::{
-    positive_weight, sanitize, CellSample, Distribution2D, Sample2D, CDF_ONE, ONE_MINUS_EPSILON,
-    STAGED_BLOCK,
+    positive_weight, probability_of_widths, sanitize, CellSample, Distribution2D, Sample2D,
+    ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
 use crate::math::prefetch_ptr;
@@ -281,13 +281,19 @@ impl BilinearDistribution2D {
     /// When the patch is outside the grid.
     #[inline(always)]
     fn patch_pdf(&self, i: usize, k: usize, u: f64, v: f64) -> f32 {
-        let factor = self.factors[k * (self.u.nodes.len() - 1) + i];
         pdf_from_weights(
             corners32(&self.values, self.u.nodes.len(), i, k),
             [self.u.weights(i, u), self.v.weights(k, v)],
-            factor,
+            self.factors[self.patch_index(i, k)],
             self.scale,
         )
+    }
+
+    /// Where patch `[i, k]`'s factor is: row-major over the `mu − 1` patches of
+    /// a row.
+    #[inline(always)]
+    fn patch_index(&self, i: usize, k: usize) -> usize {
+        k.wrapping_mul(self.u.nodes.len() - 1).wrapping_add(i)
     }
 
     /// The patch `[i, k]` holding `uv` (clamped onto the square), and the point as
@@ -308,8 +314,7 @@ impl BilinearDistribution2D {
         let top = k.wrapping_mul(mu).wrapping_add(i);
         prefetch_ptr(self.values.as_ptr().wrapping_add(top));
         prefetch_ptr(self.values.as_ptr().wrapping_add(top.wrapping_add(mu)));
-        let patch = k.wrapping_mul(mu - 1).wrapping_add(i);
-        prefetch_ptr(self.factors.as_ptr().wrapping_add(patch));
+        prefetch_ptr(self.factors.as_ptr().wrapping_add(self.patch_index(i, k)));
     }
 
     /// [`Self::pdf_in_patch`] for a block of patches and points: the patches'
@@ -329,7 +334,7 @@ impl BilinearDistribution2D {
         for (j, (&[i, k], &[u, v])) in patches.iter().zip(points).enumerate() {
             corners[j] = corners32(&self.values, mu, i, k);
             weights[j] = [self.u.weights(i, u), self.v.weights(k, v)];
-            factors[j] = self.factors[k * (mu - 1) + i];
+            factors[j] = self.factors[self.patch_index(i, k)];
         }
         for j in 0..N {
             out[j] = pdf_from_weights(corners[j], weights[j], factors[j], self.scale);
@@ -412,7 +417,7 @@ impl BilinearDistribution2D {
                         *values.get_unchecked(bottom),
                         *values.get_unchecked(bottom + 1),
                     ],
-                    *factors.get_unchecked(k * (mu - 1) + i),
+                    *factors.get_unchecked(self.patch_index(i, k)),
                 )
             };
             out[j] = pdf_from_weights(corners, weights[j], factor, self.scale);
@@ -683,17 +688,17 @@ fn patch_factors(
     for (k, row) in factors.chunks_mut(mu - 1).enumerate() {
         let (cdf, marginal) = patches.row_widths(k);
         let height = v_nodes[k + 1] - v_nodes[k];
-        let row_scale = 4.0 * (marginal as f64 / CDF_ONE as f64) / (c * height * height);
+        let row_scale = c * height * height;
         let (top, bottom) = (
             &values[k * mu..(k + 1) * mu],
             &values[(k + 1) * mu..(k + 2) * mu],
         );
         for (i, f) in row.iter_mut().enumerate() {
             let sum = top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64;
-            let width = (cdf[i + 1] - cdf[i]) as f64 / CDF_ONE as f64;
-            let denominator = widths[i] * widths[i] * sum;
-            let factor = (row_scale * width / denominator).min(f32::MAX as f64) as f32;
-            *f = if denominator > 0.0 && width > 0.0 && row_scale > 0.0 {
+            let probability = probability_of_widths([cdf[i + 1] - cdf[i], marginal]);
+            let denominator = row_scale * widths[i] * widths[i] * sum;
+            let factor = (4.0 * probability / denominator).min(f32::MAX as f64) as f32;
+            *f = if denominator > 0.0 && probability > 0.0 {
                 factor
             } else {
                 0.0
@@ -957,14 +962,15 @@ impl Axis {
         let last = nodes.len() - 2;
         let mut y = round_below_one(x);
         for _ in 0..4 {
-            let yd = y as f64;
-            if i < last && yd >= nodes[i + 1] && y > 0.0 {
-                y = f32::from_bits(y.to_bits() - 1);
-            } else if yd < nodes[i] {
-                y = f32::from_bits(y.to_bits() + 1);
-            } else {
+            if kept_in_patch(y, nodes[i], nodes[i + 1], i == last) {
                 return (y, i);
             }
+            // Not kept: at or past the end (step down), or before the start.
+            y = if (y as f64) < nodes[i] {
+                f32::from_bits(y.to_bits() + 1)
+            } else {
+                f32::from_bits(y.to_bits() - 1)
+            };
         }
         (y, self.patch(y as f64))
     }
@@ -1026,9 +1032,9 @@ fn round_below_one(x: f64) -> f32 {
     (x as f32).min(ONE_MINUS_EPSILON)
 }
 
-/// Whether [`Axis::point_in_patch`]'s first pass keeps `y` (from
-/// [`round_below_one`]) in the patch `[start, end]` (`last`: the axis's last
-/// patch, which keeps its end).
+/// Whether [`Axis::point_in_patch`] keeps `y` in the patch `[start, end]`
+/// (`last`: the axis's last patch, which keeps its end): the test of each of its
+/// passes, which a block of samples makes first in lanes.
 #[inline(always)]
 fn kept_in_patch(y: f32, start: f64, end: f64, last: bool) -> bool {
     let yd = y as f64;

@@ -815,6 +815,13 @@ pub struct Sample2D {
     pub cell: [usize; 2],
 }
 
+/// The probability of a cell of a [`Distribution2D`] of CDF widths `[wu, wv]`:
+/// `wu wv / CDF_ONE²`.
+#[inline(always)]
+pub(crate) fn probability_of_widths([wu, wv]: [u32; 2]) -> f64 {
+    (wu as f64 * (1.0 / CDF_ONE as f64)) * (wv as f64 * (1.0 / CDF_ONE as f64))
+}
+
 /// A cell picked by a [`Distribution2D`], before a point is placed in it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct CellSample {
@@ -1015,7 +1022,7 @@ impl Distribution2D {
 
     /// Row `iv`'s conditional CDF (`nu + 1` entries) and its width in the
     /// marginal CDF: each cell's probability is `(cdf[iu + 1] − cdf[iu]) ·
-    /// width`, in units of `CDF_ONE⁻²`.
+    /// width` in CDF units ([`probability_of_widths`]).
     ///
     /// # Panics
     /// When `iv >= nv`.

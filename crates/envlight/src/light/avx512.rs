@@ -330,26 +330,19 @@ fn bilinear_pdf_blocks<const AHEAD: bool>(
     }
 }
 
-/// The even and odd floats of two vectors of 16 (lanes `0..16` the first's,
-/// `16..32` the second's).
-const EVEN: [i32; 16] = {
+/// Lanes `start, start + 2, …` of two vectors of 16 (lanes `0..16` the first's,
+/// `16..32` the second's): their even (`start` 0) or odd (1) floats.
+const fn every_other(start: i32) -> [i32; 16] {
     let mut e = [0; 16];
     let mut i = 0;
     while i < 16 {
-        e[i] = 2 * i as i32;
+        e[i] = 2 * i as i32 + start;
         i += 1;
     }
     e
-};
-const ODD: [i32; 16] = {
-    let mut o = [0; 16];
-    let mut i = 0;
-    while i < 16 {
-        o[i] = 2 * i as i32 + 1;
-        i += 1;
-    }
-    o
-};
+}
+const EVEN: [i32; 16] = every_other(0);
+const ODD: [i32; 16] = every_other(1);
 
 /// Lanes 8 to 15.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
