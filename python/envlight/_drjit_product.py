@@ -13,7 +13,10 @@ A shading point with normal n draws directions with density ∝ L(ω) · max(0, 
   point in it, every pick in f64 and integers as on the CPU;
 - the direction of that point from the light port's f32 mapping (``TableLight``),
   settled into the sampled texel as the light's samples are, and its pdf evaluated
-  at the returned direction, as ``ShadingPoint::pdf`` evaluates one.
+  at the returned direction, as ``ShadingPoint::pdf`` evaluates one;
+- the horizon's band: a draw with −s < n̂·ω < 0 (s = ``horizon_band``) returned as
+  its mirror image in the tangent plane, and the pdf of a direction within the
+  band above the horizon holding its mirror image's density too.
 
 In JIT variants the picks run in ``Float64`` and ``UInt32``, the placement in the
 grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Python
@@ -68,6 +71,7 @@ class TableProduct:
         self.texel_scale = float(iw) * float(ih) / CDF_ONE
         self.bound_share = float(tables["bound_share"])
         self.box_slack = float(tables["box_slack"])
+        self.horizon_band = float(tables["horizon_band"])
         empty = np.asarray(tables["node_empty"], dtype=bool)
         self.any_empty = bool(empty.any())
         # An empty table is one of total 0: the mix reads the totals only.
@@ -270,7 +274,8 @@ class TableProduct:
         tables_share = dr.select(only_tables, 1.0, t_share * inv_sum)
         weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
         return {"anything": anything, "node": node, "p": p, "last": last,
-                "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights}
+                "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights,
+                "normal": (nx * inv, ny * inv, nz * inv)}
 
     # -- picks ------------------------------------------------------------------------------
 
@@ -402,13 +407,31 @@ class TableProduct:
         planar = self._f32(self._patch_probability(state, k) * density)
         return dr.select(state["anything"] & (width > 0), planar, 0.0)
 
-    def pdf(self, nx, ny, nz, dx, dy, dz, state=None):
-        """The pdf per steradian of direction (dx, dy, dz) at normal (nx, ny, nz)."""
-        if state is None:
-            state = self.point(nx, ny, nz)
+    def _drawn_pdf(self, state, dx, dy, dz):
+        """The density of the draws before the horizon's reflection."""
         u, v, inv_j = self.light.local_to_uv(*self.light.to_light(dx, dy, dz))
         pdf = self.planar_pdf(state, u, v) * inv_j
         return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
+
+    def _horizon(self, state, dx, dy, dz):
+        """n̂·ω for a world direction, and its mirror image in the tangent plane."""
+        mx, my, mz = state["normal"]
+        c = (mx * dx + my * dy) + mz * dz
+        twice = 2.0 * c
+        return c, (dx - mx * twice, dy - my * twice, dz - mz * twice)
+
+    def pdf(self, nx, ny, nz, dx, dy, dz, state=None):
+        """The pdf per steradian of direction (dx, dy, dz) at normal (nx, ny, nz):
+        the draws' density, plus its mirror image's within the horizon's band
+        above the horizon, 0 within the band below (``ShadingPoint::pdf``)."""
+        if state is None:
+            state = self.point(nx, ny, nz)
+        s = self.horizon_band
+        c, mirror = self._horizon(state, dx, dy, dz)
+        own = self._drawn_pdf(state, dx, dy, dz)
+        band = (c < s) & (c > -s)
+        both = own + self._drawn_pdf(state, *mirror)
+        return dr.select(band, dr.select(c < 0.0, 0.0 * own, both), own)
 
     def sample(self, nx, ny, nz, xi0, xi1, outer=None):
         """A direction for ξ ∈ [0, 1)² at normal (nx, ny, nz): ((x, y, z) world, pdf
@@ -480,7 +503,21 @@ class TableProduct:
             cu = (light._f(i) + 0.5) / float(self.iw)
             cv = (light._f(j) + 0.5) / float(self.ih)
         (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, self._cell_of, outer)
-        pdf = self.planar_pdf(state, bu, bv) * inv_j
+        # A draw just below the horizon is returned as its mirror image (in the
+        # tables' world frame, inside any outer frame), with that direction's image
+        # point and radiance; the pdf is evaluated where the caller will.
+        outer_to_world, outer_to_light = outer if outer is not None else (None, None)
+        t = outer_to_light(dx, dy, dz) if outer is not None else (dx, dy, dz)
+        c, (rx, ry, rz) = self._horizon(state, *t)
+        reflect = (c < 0.0) & (c > -self.horizon_band)
+        r = outer_to_world(rx, ry, rz) if outer is not None else (rx, ry, rz)
+        dx, dy, dz = (dr.select(reflect, a, b) for a, b in zip(r, (dx, dy, dz)))
+        r_light = outer_to_light(*r) if outer is not None else r
+        back = tuple(dr.select(reflect, a, b) for a, b in zip(r_light, t))
+        ru, rv, _ = light.local_to_uv(*light.to_light(*back))
+        bu = dr.select(reflect, ru, bu)
+        bv = dr.select(reflect, rv, bv)
+        pdf = self.pdf(nx, ny, nz, *back, state=state)
         valid = state["anything"] & (pdf > 0.0) & (pdf < float("inf"))
         rgb = light.lookup(bu, bv)
         zero = 0.0 * inv_j

@@ -79,6 +79,9 @@ impl SphereSampler for Counting<'_> {
     fn grid(&self) -> Option<Grid> {
         SphereSampler::grid(self.light)
     }
+    fn fold(&self) -> Option<(Vec3, f32)> {
+        SphereSampler::fold(self.light)
+    }
     fn reported_efficiency(&self) -> Option<f64> {
         SphereSampler::reported_efficiency(self.light)
     }
@@ -126,6 +129,9 @@ impl SphereSampler for Defaults<'_> {
     }
     fn grid(&self) -> Option<Grid> {
         SphereSampler::grid(self.0)
+    }
+    fn fold(&self) -> Option<(Vec3, f32)> {
+        SphereSampler::fold(self.0)
     }
 }
 

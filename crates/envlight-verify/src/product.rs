@@ -92,6 +92,11 @@ impl SphereSampler for AtShadingPoint<'_> {
     fn grid(&self) -> Option<Grid> {
         SphereSampler::grid(self.light())
     }
+    fn fold(&self) -> Option<(Vec3, f32)> {
+        // The horizon's band: its draws are reflected above the horizon.
+        let f = self.factor.normalized()?;
+        Some((f.normal(), envlight::product::HORIZON_BAND))
+    }
     fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
         // As `sample_batch`: `sampler.at(factor).pdf(ω)` per direction.
         let factors = vec![self.factor; directions.len()];

@@ -60,6 +60,12 @@ pub struct Quadrature {
     /// (interleaved: `0 < 1/h < 1/(h-1) < 2/h < …`), `nv / (2h - 2)` cells each, so
     /// that neither the density's steps nor the radiance's kinks fall inside a cell.
     pub node_rows: usize,
+    /// How many times each way a cell within a fold's band is split (see
+    /// [`SphereSampler::fold`]): 1 but for the chi-square's expected counts
+    /// ([`FOLD_SPLIT`]), which need the mirror images of the grid's edges there;
+    /// elsewhere their error is far below the checks' tolerances, and the cells
+    /// the fold's circles cross are split in every rule.
+    pub fold_split: usize,
 }
 
 impl Quadrature {
@@ -87,6 +93,7 @@ impl Quadrature {
                 nv: min_cells[1],
                 order,
                 node_rows: 0,
+                fold_split: 1,
             };
         };
         match g {
@@ -119,6 +126,7 @@ impl Quadrature {
                     nv: height * sv,
                     order,
                     node_rows,
+                    fold_split: 1,
                 }
             }
             Grid::EqualArea { size, to_world, .. } => {
@@ -134,6 +142,7 @@ impl Quadrature {
                     nv: size * sub,
                     order,
                     node_rows: 0,
+                    fold_split: 1,
                 }
             }
         }
@@ -154,9 +163,109 @@ impl Quadrature {
             .collect()
     }
 
+    /// The world direction of the grid point `(x, y)` in cell units.
+    fn direction_at(&self, x: f64, y: f64) -> Vec3 {
+        let (u, v) = (x / self.nu as f64, y / self.nv as f64);
+        let local = match self.param {
+            Param::Equirect => {
+                let j = (y.floor() as usize).min(self.nv - 1);
+                let (start, dv) = self.v_cell(j, 1.0 / self.nv as f64);
+                let (st, ct) = (PI * (start + (y - j as f64) * dv)).sin_cos();
+                let (sp, cp) = (2.0 * PI * u).sin_cos();
+                Vec3::new((st * cp) as f32, (st * sp) as f32, ct as f32)
+            }
+            Param::EqualArea => to_f32(square_to_sphere(u, v)),
+        };
+        self.to_world.apply(local)
+    }
+
+    /// How many times each way cell `(i, j)` is split for the sampler's `fold`
+    /// (see [`SphereSampler::fold`]): when one of its circles `a·ω = -s, 0, s` may
+    /// cross the cell, enough for parts at most [`SPLIT_ANGLE`] across (at least
+    /// [`SPLIT`], at most 256); else [`Self::fold_split`] within the band `0 ≤ a·ω < s`,
+    /// where the pdf jumps along the mirror images of the grid's edges; else 1. A
+    /// circle may cross the cell when `a·ω` at its corners and centre brackets it,
+    /// widened by the largest distance from the centre to a corner (which bounds
+    /// how far the circle can bulge between the corners).
+    fn split(&self, corners: [Vec3; 4], (axis, band): (Vec3, f32)) -> usize {
+        let sum = corners.iter().fold(Vec3::new(0.0, 0.0, 0.0), |a, &d| a + d);
+        let centre = sum.normalized().unwrap_or(corners[0]);
+        let reach = corners
+            .iter()
+            .map(|&d| (d - centre).length())
+            .fold(0.0f32, f32::max);
+        let dots = corners.map(|d| axis.dot(d));
+        let lo = dots.iter().fold(axis.dot(centre), |m, &d| m.min(d)) - reach;
+        let hi = dots.iter().fold(axis.dot(centre), |m, &d| m.max(d)) + reach;
+        if [-band, 0.0, band].iter().any(|&c| lo <= c && c <= hi) {
+            ((2.0 * reach as f64 / SPLIT_ANGLE).ceil() as usize).clamp(SPLIT, 256)
+        } else if lo >= 0.0 && hi < band {
+            self.fold_split
+        } else {
+            1
+        }
+    }
+
+    /// The points of cell `(i, j)` split `m × m` times, `order²` per part.
+    fn push_split_cell(&self, p: &mut Points, i: usize, j: usize, m: usize) {
+        let (t, w) = gauss_legendre(self.order);
+        let (du, dv) = (1.0 / self.nu as f64, 1.0 / self.nv as f64);
+        let part = 1.0 / m as f64;
+        for b in 0..m {
+            for (&tv, &wv) in t.iter().zip(w) {
+                let y = (b as f64 + tv) * part;
+                for a in 0..m {
+                    for (&tu, &wu) in t.iter().zip(w) {
+                        let x = (a as f64 + tu) * part;
+                        let d = self.direction_at(i as f64 + x, j as f64 + y);
+                        let (weight, near_pole) = match self.param {
+                            Param::Equirect => {
+                                let (start, dv) = self.v_cell(j, dv);
+                                let st = (PI * (start + y * dv)).sin();
+                                let weight = wv * st * PI * dv * 2.0 * PI * du * wu;
+                                (weight * part * part, st < POLE_BAND_SIN)
+                            }
+                            Param::EqualArea => (4.0 * PI * du * dv * wu * wv * part * part, false),
+                        };
+                        p.push(d, weight, near_pole);
+                    }
+                }
+            }
+        }
+    }
+
     /// The points of row `j`, cell by cell: world direction, `dω` weight, and
-    /// whether it is near a pole ([`Param::near_pole`]); `order²` per cell.
-    fn row_points(&self, j: usize, phis: &[(f64, f64)]) -> Points {
+    /// whether it is near a pole ([`Param::near_pole`]); `order²` per cell, or
+    /// `(m · order)²` where the sampler's `fold` asks for more (`m` from `split`).
+    fn row_points(&self, j: usize, phis: &[(f64, f64)], fold: Option<(Vec3, f32)>) -> Points {
+        let plain = self.plain_row_points(j, phis);
+        let Some(fold) = fold else {
+            return plain;
+        };
+        // The cells' corners along the row's two edges.
+        let edge = |y: f64| -> Vec<Vec3> {
+            (0..=self.nu)
+                .map(|i| self.direction_at(i as f64, y))
+                .collect()
+        };
+        let (top, bottom) = (edge(j as f64), edge(j as f64 + 1.0));
+        let mut p = Points::with_capacity(plain.directions.len());
+        for i in 0..self.nu {
+            let m = self.split([top[i], top[i + 1], bottom[i], bottom[i + 1]], fold);
+            if m == 1 {
+                for q in plain.ends[i]..plain.ends[i + 1] {
+                    p.push(plain.directions[q], plain.weights[q], plain.near_pole[q]);
+                }
+            } else {
+                self.push_split_cell(&mut p, i, j, m);
+            }
+            p.end_cell();
+        }
+        p
+    }
+
+    /// [`Self::row_points`] without a fold.
+    fn plain_row_points(&self, j: usize, phis: &[(f64, f64)]) -> Points {
         let (t, w) = gauss_legendre(self.order);
         let (du, dv) = (1.0 / self.nu as f64, 1.0 / self.nv as f64);
         let rotate = !self.to_world.is_identity();
@@ -187,6 +296,7 @@ impl Quadrature {
                             p.push(world(local), weight_v * wu, st < POLE_BAND_SIN);
                         }
                     }
+                    p.end_cell();
                 }
             }
             Param::EqualArea => {
@@ -199,6 +309,7 @@ impl Quadrature {
                             p.push(world(local), area * wu * wv, false);
                         }
                     }
+                    p.end_cell();
                 }
             }
         }
@@ -228,15 +339,17 @@ impl Quadrature {
 
     /// Per-cell sums of `f(point)` over row `j`, the sampler's values at the
     /// points looked up in batches (only those `needs` asks for).
+    #[allow(clippy::too_many_arguments)]
     fn row<const K: usize>(
         &self,
         j: usize,
         phis: &[(f64, f64)],
+        fold: Option<(Vec3, f32)>,
         s: &dyn SphereSampler,
         needs: Needs,
         f: &(impl Fn(&Point) -> [f64; K] + Sync),
     ) -> Vec<[f64; K]> {
-        let points = self.row_points(j, phis);
+        let points = self.row_points(j, phis, fold);
         let n = points.directions.len();
         let mut radiance = vec![[0.0f32; 3]; if needs.radiance { n } else { 0 }];
         let mut pdf = vec![0.0f32; if needs.pdf { n } else { 0 }];
@@ -246,10 +359,9 @@ impl Quadrature {
         if needs.pdf {
             s.pdf_batch(&points.directions, &mut pdf);
         }
-        let per_cell = n / self.nu;
         let mut out = vec![[0.0; K]; self.nu];
         for (k, cell) in out.iter_mut().enumerate() {
-            for q in k * per_cell..(k + 1) * per_cell {
+            for q in points.ends[k]..points.ends[k + 1] {
                 let r = f(&Point {
                     direction: points.directions[q],
                     weight: points.weights[q],
@@ -272,10 +384,10 @@ impl Quadrature {
         needs: Needs,
         f: impl Fn(&Point) -> [f64; K] + Sync,
     ) -> Vec<[f64; K]> {
-        let phis = self.phi_table();
+        let (phis, fold) = (self.phi_table(), s.fold());
         (0..self.nv)
             .into_par_iter()
-            .flat_map_iter(|j| self.row(j, &phis, s, needs, &f))
+            .flat_map_iter(|j| self.row(j, &phis, fold, s, needs, &f))
             .collect()
     }
 
@@ -286,7 +398,7 @@ impl Quadrature {
         needs: Needs,
         f: impl Fn(&Point) -> [f64; K] + Sync,
     ) -> [f64; K] {
-        let phis = self.phi_table();
+        let (phis, fold) = (self.phi_table(), s.fold());
         let add = |mut a: [f64; K], c: &[f64; K]| {
             for k in 0..K {
                 a[k] += c[k];
@@ -295,7 +407,11 @@ impl Quadrature {
         };
         let rows: Vec<[f64; K]> = (0..self.nv)
             .into_par_iter()
-            .map(|j| self.row(j, &phis, s, needs, &f).iter().fold([0.0; K], add))
+            .map(|j| {
+                self.row(j, &phis, fold, s, needs, &f)
+                    .iter()
+                    .fold([0.0; K], add)
+            })
             .collect();
         rows.iter().fold([0.0; K], add)
     }
@@ -310,6 +426,16 @@ impl Quadrature {
         )
     }
 }
+
+/// How many times each way [`Quadrature`] splits a cell that a circle of a fold
+/// of the pdf crosses ([`SphereSampler::fold`]), at least.
+pub const SPLIT: usize = 8;
+
+/// The largest size (radians) of the parts of a split cell, up to 256 a side.
+pub const SPLIT_ANGLE: f64 = 0.004;
+
+/// How many times each way [`Quadrature`] splits a cell within a fold's band.
+pub const FOLD_SPLIT: usize = 4;
 
 /// Which of the sampler's values [`Quadrature::sum`] and [`Quadrature::cells`]
 /// look up at the points (the others read as 0).
@@ -354,6 +480,8 @@ struct Points {
     directions: Vec<Vec3>,
     weights: Vec<f64>,
     near_pole: Vec<bool>,
+    /// Cell `k`'s points are `ends[k]..ends[k + 1]`.
+    ends: Vec<usize>,
 }
 
 impl Points {
@@ -362,7 +490,12 @@ impl Points {
             directions: Vec::with_capacity(n),
             weights: Vec::with_capacity(n),
             near_pole: Vec::with_capacity(n),
+            ends: vec![0],
         }
+    }
+    /// Closes the current cell.
+    fn end_cell(&mut self) {
+        self.ends.push(self.directions.len());
     }
     fn push(&mut self, d: Vec3, w: f64, near_pole: bool) {
         self.directions.push(d);

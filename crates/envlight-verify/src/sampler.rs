@@ -113,6 +113,14 @@ pub trait SphereSampler: Sync {
     fn reported_efficiency(&self) -> Option<f64> {
         None
     }
+    /// A fold `(a, s)` (a unit world axis and `0 < s ≤ 1`) of the pdf off the
+    /// grid: draws with `-s < a·ω < 0` are reflected to `ω − 2(a·ω)a` (a product
+    /// sampler's horizon band), so the pdf jumps along the circles `a·ω = -s, 0, s`
+    /// and, within `0 ≤ a·ω < s`, along the mirror images of the grid's edges. The
+    /// quadrature splits the cells there ([`crate::Quadrature`]).
+    fn fold(&self) -> Option<(Vec3, f32)> {
+        None
+    }
     /// [`Self::sample`] of every `ξ`, written to `out` (as long as `xi`) in order.
     /// The checks draw their samples through this, one call per chunk of `ξ`
     /// ([`over_sample_chunks`](crate::over_sample_chunks)); a sampler with a

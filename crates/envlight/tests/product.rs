@@ -339,6 +339,9 @@ impl SphereSampler for ScaledPdf<'_> {
     fn grid(&self) -> Option<Grid> {
         self.inner.grid()
     }
+    fn fold(&self) -> Option<(Vec3, f32)> {
+        self.inner.fold()
+    }
 }
 
 #[test]

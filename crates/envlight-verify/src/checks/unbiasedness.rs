@@ -49,9 +49,14 @@ impl Estimate {
     /// whichever is larger. Below one standard error an error in the reference
     /// moves the test by at most a quarter of its width; this matters for lobes
     /// that see only a sliver of the integrand (a reference 1e-5 of the total,
-    /// with a cosine's kink through it).
+    /// with a cosine's kink through it). Plus [`MASS_RESOLUTION`] of the whole
+    /// light, as in [`Self::tolerance`]: an integrand that is 0 but for rounding
+    /// (a cosine lobe opposite the normal, whose product with the normal's cosine
+    /// is positive only where f32 rounding puts a point on both sides) has a
+    /// reference and an error estimate of that order.
     pub fn quadrature_allowance(&self) -> f64 {
         (QUADRATURE_SLACK * self.reference.abs()).max(self.std_err)
+            + MASS_RESOLUTION * self.total.abs()
     }
     /// Deviation in standard errors (0 when both are exactly equal, e.g. a lobe
     /// facing only black).

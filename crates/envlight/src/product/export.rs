@@ -94,6 +94,9 @@ pub struct ProductTables {
     pub bound_share: f64,
     /// What a lat-long box's bound adds for rounding.
     pub box_slack: f64,
+    /// [`super::HORIZON_BAND`]: draws with `-horizon_band < n̂·ω < 0` are reflected
+    /// in the tangent plane.
+    pub horizon_band: f32,
 }
 
 impl Fine {
