@@ -728,39 +728,32 @@ impl ShadingPoint<'_> {
 
         let (local, jacobian) = light.uv_to_local(uv);
         let direction = light.local_to_world(local);
-        let cosine = self.normal.dot(direction);
-        if cosine < HORIZON_BAND {
-            // Within the horizon's band: below it, reflected above (its image
-            // point and radiance are the mirror image's); above it, the density
-            // holds the mirror image's too. Either way the pdf is evaluated at the
-            // returned direction, as the caller will.
-            let (direction, uv) = if cosine < 0.0 && cosine > -HORIZON_BAND {
-                let mirror = direction - self.normal * (2.0 * cosine);
-                (mirror, light.local_to_uv(light.world_to_local(mirror)).0)
-            } else {
-                (direction, uv)
-            };
-            let pdf = self.pdf(direction);
-            if !is_positive_finite(pdf) {
-                return None;
-            }
-            return Some(LightSample {
-                direction,
-                pdf,
-                radiance: light.radiance_at_uv(uv),
-                uv,
-            });
-        }
         // A piecewise-constant density is exact at `uv`, whose cell (and so patch)
         // is the one sampled. A bilinear density changes across the f32 rounding
         // of the direction (by up to ~1e-3 relative next to a bright texel): its
         // pdf is evaluated where the caller will, at the returned direction, as
         // the light does.
-        let pdf = match density {
-            Some(q) => (self.patch_probability(k) * q) as f32 / jacobian,
-            None => self.pdf(direction),
+        let drawn = |direction| match density {
+            Some(q) if jacobian > 0.0 => (self.patch_probability(k) * q) as f32 / jacobian,
+            _ => self.drawn_pdf(direction),
         };
-        if !(jacobian > 0.0 && is_positive_finite(pdf)) {
+        let cosine = self.normal.dot(direction);
+        let (direction, uv, pdf) = if cosine >= HORIZON_BAND || cosine <= -HORIZON_BAND {
+            (direction, uv, drawn(direction))
+        } else if cosine >= 0.0 {
+            // Within the horizon's band above it: the density holds the mirror
+            // image's too.
+            let mirror = direction - self.normal * (2.0 * cosine);
+            (direction, uv, drawn(direction) + self.drawn_pdf(mirror))
+        } else {
+            // Within the band below the horizon: reflected above it, with the
+            // mirror image's image point and radiance, and the pdf evaluated at
+            // the returned direction, as the caller will.
+            let mirror = direction - self.normal * (2.0 * cosine);
+            let uv = light.local_to_uv(light.world_to_local(mirror)).0;
+            (mirror, uv, self.pdf(mirror))
+        };
+        if !is_positive_finite(pdf) {
             return None;
         }
         Some(LightSample {

@@ -947,8 +947,8 @@ fn on_the_fly_product_is_a_density() {
 
 /// The horizon's band: no sample lands in it below the horizon (its draws are
 /// reflected above), and of the rest few lie below the horizon, for random
-/// normals under the built-in sky, whose hazy horizon and low sun put up to 4.5%
-/// of the draws there without the reflection (BENCHMARKS.md).
+/// normals under the built-in sky, whose hazy horizon puts up to 2.1% of the
+/// draws there without the reflection.
 #[test]
 fn samples_stay_above_the_horizon() {
     let light = EnvironmentLight::new(crate::builtin::sky(256, 128), LightOptions::default());
