@@ -14,9 +14,11 @@ A shading point with normal n draws directions with density ∝ L(ω) · max(0, 
 - the direction of that point from the light port's f32 mapping (``TableLight``),
   settled into the sampled texel as the light's samples are, and its pdf evaluated
   at the returned direction, as ``ShadingPoint::pdf`` evaluates one;
-- the horizon's band: a draw with −s < n̂·ω < 0 (s = ``horizon_band``) returned as
-  its mirror image in the tangent plane, and the pdf of a direction within the
-  band above the horizon holding its mirror image's density too.
+- the horizon's band: a draw with −s < n̂·ω < 0 (s = ``horizon_band``, or less
+  down to ``min_horizon_band`` to keep the lowest bright patch wholly above the
+  horizon out of it) returned as its mirror image in the tangent plane, and the
+  pdf of a direction within the band above the horizon holding its mirror
+  image's density too.
 
 In JIT variants the picks run in ``Float64`` and ``UInt32``, the placement in the
 grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Python
@@ -72,6 +74,7 @@ class TableProduct:
         self.bound_share = float(tables["bound_share"])
         self.box_slack = float(tables["box_slack"])
         self.horizon_band = float(tables["horizon_band"])
+        self.min_horizon_band = float(tables["min_horizon_band"])
         empty = np.asarray(tables["node_empty"], dtype=bool)
         self.any_empty = bool(empty.any())
         # An empty table is one of total 0: the mix reads the totals only.
@@ -248,6 +251,9 @@ class TableProduct:
         share = self.bound_share
         weights = []
         bright = 0.0 * v0
+        # The horizon's band: narrowed to the lowest bright patch with weight that
+        # lies wholly above the horizon (`Bright::lowest_above`).
+        lowest = 0.0 * v0 + self.horizon_band
         for item in self.bright:
             power, cx, cy, cz = item[1], item[2], item[3], item[4]
             value = (v0 * cx + v1 * cy) + v2 * cz
@@ -256,6 +262,9 @@ class TableProduct:
             o = power * dr.select(value >= share * 1.001, value, g)
             weights.append(o)
             bright = bright + o
+            lower = -self._max_dot(item, -v0, -v1, -v2, rho)
+            lowest = dr.select((o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest)
+        band = dr.clip(self._f32(lowest), self.min_horizon_band, self.horizon_band)
         total = tables + bright
         anything = ok & (total > 0.0) & (total < float("inf"))
         # Shares, each with weight kept at least one CDF unit.
@@ -275,7 +284,7 @@ class TableProduct:
         weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
         return {"anything": anything, "node": node, "p": p, "last": last,
                 "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights,
-                "normal": (nx * inv, ny * inv, nz * inv)}
+                "normal": (nx * inv, ny * inv, nz * inv), "band": band}
 
     # -- picks ------------------------------------------------------------------------------
 
@@ -426,7 +435,7 @@ class TableProduct:
         above the horizon, 0 within the band below (``ShadingPoint::pdf``)."""
         if state is None:
             state = self.point(nx, ny, nz)
-        s = self.horizon_band
+        s = state["band"]
         c, mirror = self._horizon(state, dx, dy, dz)
         own = self._drawn_pdf(state, dx, dy, dz)
         band = (c < s) & (c > -s)
@@ -509,7 +518,7 @@ class TableProduct:
         outer_to_world, outer_to_light = outer if outer is not None else (None, None)
         t = outer_to_light(dx, dy, dz) if outer is not None else (dx, dy, dz)
         c, (rx, ry, rz) = self._horizon(state, *t)
-        reflect = (c < 0.0) & (c > -self.horizon_band)
+        reflect = (c < 0.0) & (c > -state["band"])
         r = outer_to_world(rx, ry, rz) if outer is not None else (rx, ry, rz)
         dx, dy, dz = (dr.select(reflect, a, b) for a, b in zip(r, (dx, dy, dz)))
         r_light = outer_to_light(*r) if outer is not None else r

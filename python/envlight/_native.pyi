@@ -136,7 +136,8 @@ class EnvironmentLight:
         (pw ph, 5), "table_slots" (nodes pw ph, 2), "table_widths" (pw ph, nodes);
         "node_empty" uint8, "node_totals" float64 (nodes,); "bright" float64
         (B, 20), "bright_of_patch" uint8 (pw ph,); "bound_share", "box_slack",
-        "horizon_band" (draws this close below the horizon are reflected above it);
+        "horizon_band", "min_horizon_band" (a point's band: draws this close below
+        the horizon are reflected above it);
         and for the piecewise-bilinear density "node_values" float32 (h + 2, w + 2),
         "u_nodes", "v_nodes" float64. Directions in the light's z-up frame before
         its rotation."""

@@ -939,7 +939,7 @@ impl PyEnvironmentLight {
     /// `cell_widths` `(ch, cw)`, `cell_slots` `(cw ch, 2)`, `spans` `(pw ph, 5)`,
     /// `table_slots` `(nodes pw ph, 2)`, `table_widths` `(pw ph, nodes)`,
     /// `node_empty`, `node_totals`, `bright` `(B, 20)` float64, `bright_of_patch`,
-    /// `bound_share`, `box_slack`, `horizon_band`. Directions in these tables are in the light's
+    /// `bound_share`, `box_slack`, `horizon_band`, `min_horizon_band`. Directions in these tables are in the light's
     /// z-up frame before its rotation.
     fn product_tables<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let t = py.detach(|| self.product().cosine_tables());
@@ -1022,6 +1022,7 @@ impl PyEnvironmentLight {
         out.set_item("bound_share", t.bound_share)?;
         out.set_item("box_slack", t.box_slack)?;
         out.set_item("horizon_band", t.horizon_band)?;
+        out.set_item("min_horizon_band", t.min_horizon_band)?;
         Ok(out)
     }
 

@@ -69,7 +69,9 @@ mod stats;
 mod suite;
 
 pub use checks::black::{black, Black};
-pub use checks::chi_square::{chi_square, pearson, ChiSquare, CHI2_QUADRATURE_CELLS, MIN_EXPECTED};
+pub use checks::chi_square::{
+    chi_square, pearson, ChiSquare, CHI2_QUADRATURE_CELLS, MAX_UNRESOLVED, MIN_EXPECTED,
+};
 pub use checks::consistency::{consistency, Consistency};
 pub use checks::normalisation::{normalisation, Normalisation};
 pub use checks::support::{support, Support};
@@ -85,7 +87,7 @@ pub use portal::{
     Quad, PORTAL_EDGE_BAND,
 };
 pub use product::{product_normals, AtShadingPoint};
-pub use quadrature::{gauss_legendre, Needs, Point, Quadrature};
+pub use quadrature::{gauss_legendre, Needs, Point, Quadrature, FOLD_SPLIT, SPLIT, SPLIT_ANGLE};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
 pub use stats::{fits, over_points, over_sample_chunks, over_samples, Moments};

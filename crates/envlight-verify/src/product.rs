@@ -95,7 +95,7 @@ impl SphereSampler for AtShadingPoint<'_> {
     fn fold(&self) -> Option<(Vec3, f32)> {
         // The horizon's band: its draws are reflected above the horizon.
         let f = self.factor.normalized()?;
-        Some((f.normal(), envlight::product::HORIZON_BAND))
+        Some((f.normal(), self.point.horizon_band()))
     }
     fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
         // As `sample_batch`: `sampler.at(factor).pdf(ω)` per direction.

@@ -398,6 +398,34 @@ fn broken_weight_at_the_node_only_is_rejected() {
 }
 
 #[test]
+fn broken_fold_without_the_mirror_image_is_rejected() {
+    // Draws just below the horizon are reflected above it, but the pdf there
+    // leaves out their density: the pdf integrates to less than 1, and the
+    // samples within the band above the horizon outnumber what it predicts. One
+    // patch over the sky: the draws follow the light alone, so half of them fall
+    // below the horizon, many within the band.
+    let light = default_light(sky());
+    let sampler = ProductSampler::new(
+        light,
+        ProductOptions {
+            patches: Some([1, 1]),
+            fold_without_mirror: true,
+            ..Default::default()
+        },
+    );
+    let n = Normal::Oblique.of(sampler.light());
+    let s = AtShadingPoint::new(&sampler, Factor::cosine(n));
+    let norm = verify::normalisation(&s);
+    let chi = verify::chi_square(&s, 1_000_000, 45, 40_000);
+    println!("[{}]\n  {norm}\n  {chi}", s.name());
+    assert!(
+        norm.verdict(false).is_err() && norm.integral < 0.99,
+        "{norm}"
+    );
+    assert!(chi.verdict().is_err(), "{chi}");
+}
+
+#[test]
 fn broken_normal_ignored_is_rejected() {
     // The sampler is conditioned on +z while the surface faces down: the
     // surface's hemisphere is sampled only within the +z node's neighbourhood

@@ -173,6 +173,23 @@ impl Bright {
         total
     }
 
+    /// The least lower bound of `n·ω` over the bright patches with weight that
+    /// lie wholly above the horizon of the unit `normal` (bound above 0), when
+    /// below `ceiling`; else `ceiling`. `weights` as [`Self::weights`] wrote them.
+    pub fn lowest_above(&self, normal: &Direction, weights: &[f64], ceiling: f64) -> f64 {
+        let opposite = Direction::new(normal.v.map(|x| -x));
+        let mut lowest = ceiling;
+        for (item, &w) in self.items.iter().zip(weights) {
+            if w > 0.0 {
+                let lower = -item.region.max_dot(&opposite);
+                if lower > 0.0 && lower < lowest {
+                    lowest = lower;
+                }
+            }
+        }
+        lowest
+    }
+
     /// Bytes held.
     /// The bright patches as exported (see `ProductTables::bright`).
     pub fn exported(&self) -> Vec<super::export::BrightPatch> {

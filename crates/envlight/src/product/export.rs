@@ -94,9 +94,11 @@ pub struct ProductTables {
     pub bound_share: f64,
     /// What a lat-long box's bound adds for rounding.
     pub box_slack: f64,
-    /// [`super::HORIZON_BAND`]: draws with `-horizon_band < n̂·ω < 0` are reflected
-    /// in the tangent plane.
+    /// [`super::HORIZON_BAND`]: draws with `-s < n̂·ω < 0` are reflected in the
+    /// tangent plane, `s` this or less (see [`super::ShadingPoint::horizon_band`]).
     pub horizon_band: f32,
+    /// [`super::MIN_HORIZON_BAND`], the least `s`.
+    pub min_horizon_band: f32,
 }
 
 impl Fine {

@@ -43,7 +43,9 @@
 //! **The horizon.** Every factor holds `cos⁺(n·ω)`, yet the four tables follow
 //! their own nodes' normals and a patch is filled by the light alone, so some
 //! draws land just below the surface's horizon. A draw with `-s < n·ω < 0`
-//! (`s =` [`HORIZON_BAND`]) is returned as its mirror image in the tangent plane,
+//! (`s =` [`HORIZON_BAND`], or less down to [`MIN_HORIZON_BAND`] so that the
+//! lowest bright patch wholly above the horizon lies above the band too:
+//! [`ShadingPoint::horizon_band`]) is returned as its mirror image in the tangent plane,
 //! `Rω = ω − 2(n·ω) n`. The reflection keeps solid angle, so the density of what
 //! is returned is
 //!
@@ -115,6 +117,11 @@ pub struct ProductOptions {
     /// in tests that prove the verification harness rejects the alternative.
     #[doc(hidden)]
     pub bound: PatchBound,
+    /// Whether the pdf within the horizon's band above the horizon holds the
+    /// mirror image's density: always except in a test that proves the
+    /// verification harness rejects the fold without it.
+    #[doc(hidden)]
+    pub fold_without_mirror: bool,
 }
 
 /// How [`ProductSampler`] weights a patch.
@@ -179,16 +186,23 @@ const MIN_SHARE: f64 = 1.0 / CDF_ONE as f64;
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// The depth of the band below a surface's horizon whose samples are reflected
-/// above it, as the cosine `n·ω` (sin 20°): a draw with `-HORIZON_BAND < n·ω < 0`
-/// is returned as its mirror image `ω - 2(n·ω)n` (see [`ShadingPoint::pdf`]).
-/// The tables mix four neighbouring normals' products and a patch is sampled by
-/// the light alone, so some draws land just below the horizon, where `L·f` is 0:
-/// up to 4.6% of them for some normals, measured over the shared maps and 64
-/// random normals, of which at most 0.28% lie deeper than 20° (0.47% deeper than
-/// 15°, 0.71% than 10°; BENCHMARKS.md). A deeper band costs more second lookups
-/// (a direction within it above the horizon needs the mixture at its mirror
-/// image too: about `HORIZON_BAND²` of a cosine-distributed set).
+/// above it, as the cosine `n·ω` (sin 20°), at most: a draw with `-s < n·ω < 0`
+/// is returned as its mirror image `ω - 2(n·ω)n` (see [`ShadingPoint::pdf`];
+/// [`ShadingPoint::horizon_band`] gives a point's `s`). The tables mix four
+/// neighbouring normals' products and a patch is sampled by the light alone, so
+/// some draws land just below the horizon, where `L·f` is 0: up to 4.6% of them
+/// for some normals, measured over the shared maps and 64 random normals, of
+/// which at most 0.28% lie deeper than 20° (0.47% deeper than 15°, 0.71% than
+/// 10°; BENCHMARKS.md). A deeper band costs more second lookups (a direction
+/// within it above the horizon needs the mixture at its mirror image too: about
+/// `s²` of a cosine-distributed set).
 pub const HORIZON_BAND: f32 = 0.342_020_14;
+
+/// The least band a shading point keeps (sin 5°). A point narrows its band below
+/// [`HORIZON_BAND`] to the lowest bright patch (a sun) that lies wholly above its
+/// horizon within it, down to this: that patch's draws then need no second
+/// lookup (a low sun over a ground plane: most of its product samples).
+pub const MIN_HORIZON_BAND: f32 = 0.087_155_74;
 
 /// Samples directions at a shading point in proportion to (a close bound of) the
 /// light's radiance times a [`Factor`], with the exact pdf (DESIGN.md §6a; the
@@ -242,6 +256,8 @@ pub struct ProductSampler {
     lobe_grid: usize,
     bound: PatchBound,
     on_the_fly: bool,
+    /// [`ProductOptions::fold_without_mirror`].
+    fold_without_mirror: bool,
 }
 
 impl ProductSampler {
@@ -275,6 +291,7 @@ impl ProductSampler {
             lobe_grid,
             bound: options.bound,
             on_the_fly: options.on_the_fly,
+            fold_without_mirror: options.fold_without_mirror,
         }
     }
 
@@ -372,6 +389,7 @@ impl ProductSampler {
             bound_share: tables::BOUND_SHARE,
             box_slack: bounds::BOX_SLACK,
             horizon_band: HORIZON_BAND,
+            min_horizon_band: MIN_HORIZON_BAND,
         };
         self.fine.export_into(&mut out);
         self.cosine.export_into(&mut out);
@@ -403,6 +421,7 @@ impl ProductSampler {
             },
             anything: false,
             normal: Vec3::new(0.0, 0.0, 1.0),
+            band: HORIZON_BAND,
         }
     }
 
@@ -542,6 +561,8 @@ pub struct ShadingPoint<'a> {
     anything: bool,
     /// The factor's unit normal (world frame), for the horizon's band.
     normal: Vec3,
+    /// The horizon's band here (`s`, see [`HORIZON_BAND`]).
+    band: f32,
 }
 
 impl ShadingPoint<'_> {
@@ -608,6 +629,12 @@ impl ShadingPoint<'_> {
         let bright = sampler
             .bright
             .weights(&target, sampler.bound, self.bright.as_mut());
+        let lowest = sampler.bright.lowest_above(
+            &normal,
+            &self.bright.as_ref()[..sampler.bright.len()],
+            HORIZON_BAND as f64,
+        );
+        self.band = (lowest as f32).clamp(MIN_HORIZON_BAND, HORIZON_BAND);
         let total = tables + bright;
         if !(total > 0.0 && total.is_finite()) {
             self.mix = Mix::default();
@@ -667,6 +694,14 @@ impl ShadingPoint<'_> {
             Some(b) => self.bright.as_ref()[b],
             None => self.tables_share * self.sampler.tables(self.set).probability(&self.mix, k),
         }
+    }
+
+    /// The horizon's band at this point, `s` of the module docs: draws with
+    /// `-s < n·ω < 0` are reflected above the horizon. [`HORIZON_BAND`], or less
+    /// (not below [`MIN_HORIZON_BAND`]) to keep the lowest bright patch wholly
+    /// above the horizon out of it.
+    pub fn horizon_band(&self) -> f32 {
+        self.band
     }
 
     /// The normalised factor of this shading point, `None` when the one given was
@@ -738,13 +773,14 @@ impl ShadingPoint<'_> {
             _ => self.drawn_pdf(direction),
         };
         let cosine = self.normal.dot(direction);
-        let (direction, uv, pdf) = if cosine >= HORIZON_BAND || cosine <= -HORIZON_BAND {
+        let band = self.band;
+        let (direction, uv, pdf) = if cosine >= band || cosine <= -band {
             (direction, uv, drawn(direction))
         } else if cosine >= 0.0 {
             // Within the horizon's band above it: the density holds the mirror
             // image's too.
             let mirror = direction - self.normal * (2.0 * cosine);
-            (direction, uv, drawn(direction) + self.drawn_pdf(mirror))
+            (direction, uv, drawn(direction) + self.mirror_pdf(mirror))
         } else {
             // Within the band below the horizon: reflected above it, with the
             // mirror image's image point and radiance, and the pdf evaluated at
@@ -767,9 +803,10 @@ impl ShadingPoint<'_> {
     /// The solid-angle density (per steradian) with which [`Self::sample`] produces
     /// the world unit direction `direction`: the mixture probability of its patch
     /// times the light's density restricted to the patch, over `J(ω)`, plus the
-    /// same at its mirror image in the tangent plane within [`HORIZON_BAND`] above
-    /// the horizon (the module docs give the formula). 0 just below the horizon
-    /// (`-HORIZON_BAND < n·ω < 0`, whose draws are reflected), where the light's
+    /// same at its mirror image in the tangent plane within the horizon's band
+    /// above the horizon ([`Self::horizon_band`]; the module docs give the
+    /// formula). 0 just below the horizon (`-s < n·ω < 0`, whose draws are
+    /// reflected), where the light's
     /// density or every mixed table's weight is 0, at the poles of a lat-long map,
     /// and when nothing can be sampled.
     #[inline]
@@ -778,14 +815,25 @@ impl ShadingPoint<'_> {
             return 0.0;
         }
         let cosine = self.normal.dot(direction);
-        if cosine >= HORIZON_BAND || cosine <= -HORIZON_BAND {
+        if cosine >= self.band || cosine <= -self.band {
             return self.drawn_pdf(direction);
         }
         if cosine < 0.0 {
             return 0.0;
         }
         let mirror = direction - self.normal * (2.0 * cosine);
-        self.drawn_pdf(direction) + self.drawn_pdf(mirror)
+        self.drawn_pdf(direction) + self.mirror_pdf(mirror)
+    }
+
+    /// [`Self::drawn_pdf`] at the mirror image of a direction within the band
+    /// above the horizon (0 for the broken `fold_without_mirror`).
+    #[inline]
+    fn mirror_pdf(&self, mirror: Vec3) -> f32 {
+        if self.sampler.fold_without_mirror {
+            0.0
+        } else {
+            self.drawn_pdf(mirror)
+        }
     }
 
     /// The density of the draws before the horizon's reflection, `p(ω | n)`.

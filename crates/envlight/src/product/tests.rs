@@ -380,7 +380,7 @@ fn bilinear_density_is_followed_within_patches() {
             }
             let d = light.uv_to_direction(uv);
             // Within the horizon's band the pdf holds the mirror image's too.
-            if normal.dot(d).abs() < super::HORIZON_BAND {
+            if normal.dot(d).abs() < point.horizon_band() {
                 continue;
             }
             let (p, q) = (point.pdf(d) as f64, light.pdf(d) as f64);
@@ -469,9 +469,8 @@ fn check_integral(case: &Case) {
         let at = |i: f64, j: f64| {
             let d = direction(i, j);
             let c = normal.dot(d);
-            let side = (c < -super::HORIZON_BAND) as u8
-                + (c < 0.0) as u8
-                + (c < super::HORIZON_BAND) as u8;
+            let band = point.horizon_band();
+            let side = (c < -band) as u8 + (c < 0.0) as u8 + (c < band) as u8;
             (point.pdf(d) as f64, side)
         };
         let corners: Vec<(f64, u8)> = (0..=nv)
@@ -964,7 +963,7 @@ fn samples_stay_above_the_horizon() {
             };
             let c = normal.dot(sample.direction);
             assert!(
-                !(c < 0.0 && c > -HORIZON_BAND),
+                !(c < 0.0 && c > -point.horizon_band()),
                 "normal {normal:?}: a sample at n·ω = {c}"
             );
             let pdf = point.pdf(sample.direction);
