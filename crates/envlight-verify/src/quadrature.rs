@@ -179,14 +179,15 @@ impl Quadrature {
         self.to_world.apply(local)
     }
 
-    /// How many times each way cell `(i, j)` is split for the sampler's `fold`
+    /// How many times each way the cell with these `corners` is split for the sampler's `fold`
     /// (see [`SphereSampler::fold`]): when one of its circles `a·ω = -s, 0, s` may
     /// cross the cell, enough for parts at most [`SPLIT_ANGLE`] across (at least
     /// [`SPLIT`], at most 256); else [`Self::fold_split`] within the band `0 ≤ a·ω < s`,
     /// where the pdf jumps along the mirror images of the grid's edges; else 1. A
-    /// circle may cross the cell when `a·ω` at its corners and centre brackets it,
-    /// widened by the largest distance from the centre to a corner (which bounds
-    /// how far the circle can bulge between the corners).
+    /// circle may cross the cell when `a·ω` at its corners and centre (their
+    /// normalised mean) brackets it, widened by the largest distance from the
+    /// centre to a corner (which bounds how far the circle can bulge between the
+    /// corners).
     fn split(&self, corners: [Vec3; 4], (axis, band): (Vec3, f32)) -> usize {
         let sum = corners.iter().fold(Vec3::new(0.0, 0.0, 0.0), |a, &d| a + d);
         let centre = sum.normalized().unwrap_or(corners[0]);

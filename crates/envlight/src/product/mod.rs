@@ -806,9 +806,8 @@ impl ShadingPoint<'_> {
     /// same at its mirror image in the tangent plane within the horizon's band
     /// above the horizon ([`Self::horizon_band`]; the module docs give the
     /// formula). 0 just below the horizon (`-s < n·ω < 0`, whose draws are
-    /// reflected), where the light's
-    /// density or every mixed table's weight is 0, at the poles of a lat-long map,
-    /// and when nothing can be sampled.
+    /// reflected), where the light's density or every mixed table's weight is 0,
+    /// at the poles of a lat-long map, and when nothing can be sampled.
     #[inline]
     pub fn pdf(&self, direction: Vec3) -> f32 {
         if !self.anything {
