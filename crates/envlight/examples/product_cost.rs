@@ -8,7 +8,10 @@
 //! - `product at + sample + pdf`: a new shading point (`ShadingPoint::set_factor`),
 //!   one product sample and one product pdf;
 //! - `product sample + pdf, point reused`: the same shading point for 16 samples;
-//! - `product sample_batch + pdf_batch`: the batch calls, one factor per point.
+//! - `product sample_batch + pdf_batch`: the batch calls, one factor per point;
+//! - per GGX roughness, with the default options: the glossy tables' build (on
+//!   first use) and a new glossy shading point (random normal and outgoing
+//!   direction above it), one sample and one pdf.
 
 use envlight::load::{load, LoadOptions};
 use envlight::{
@@ -60,13 +63,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     println!("light sample: {light_sample:.1} ns; light sample + pdf: {light_sample_pdf:.1} ns");
 
-    for (grid, patches) in [
-        (8, [128, 64]),
-        (16, [64, 32]),
-        (16, [128, 64]),
-        (32, [64, 32]),
-        (32, [128, 64]),
-    ] {
+    let grids = if std::env::var_os("GLOSSY_ONLY").is_some() {
+        vec![]
+    } else {
+        vec![
+            (8, [128, 64]),
+            (16, [64, 32]),
+            (16, [128, 64]),
+            (32, [64, 32]),
+            (32, [128, 64]),
+        ]
+    };
+    for (grid, patches) in grids {
         let options = ProductOptions {
             normal_grid: Some(grid),
             patches: Some(patches),
@@ -121,6 +129,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             fresh / light_sample,
             reused / light_sample,
             batch / light_sample
+        );
+    }
+    let sampler = ProductSampler::new(light.clone(), ProductOptions::default());
+    let mut point = sampler.at(&factors[0]);
+    for alpha in [0.02f32, 0.08, 0.16, 0.25, 0.32] {
+        let glossy: Vec<Factor> = normals
+            .iter()
+            .zip(xi.iter())
+            .map(|(&n, x)| {
+                let o = envlight::math::uniform_sphere([x[1], x[0]]);
+                let o = if o.dot(n) < 0.0 { o * -1.0 } else { o };
+                Factor::glossy(n, o, alpha)
+            })
+            .collect();
+        let started = Instant::now();
+        point.set_factor(&glossy[0]);
+        let build_ms = started.elapsed().as_secs_f64() * 1e3;
+        let fresh = best(|| {
+            let start = Instant::now();
+            for (f, x) in glossy.iter().zip(&xi) {
+                point.set_factor(f);
+                if let Some(s) = point.sample(*x) {
+                    black_box(point.pdf(s.direction));
+                }
+            }
+            per_point(start)
+        });
+        println!(
+            "glossy alpha {alpha}: tables built on first use in {build_ms:.0} ms; \
+             product at + sample + pdf {fresh:.0} ns ({:.1}x light sample)",
+            fresh / light_sample
         );
     }
     Ok(())

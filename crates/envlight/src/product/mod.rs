@@ -122,6 +122,11 @@ pub struct ProductOptions {
     /// verification harness rejects the fold without it.
     #[doc(hidden)]
     pub fold_without_mirror: bool,
+    /// Whether a glossy factor looks its lobe's tables up at the mirror direction
+    /// itself, ignoring the cosine under the lobe: never except in a test that
+    /// proves an efficiency check catches it (see [`tilted_mirror`]).
+    #[doc(hidden)]
+    pub glossy_without_tilt: bool,
 }
 
 /// How [`ProductSampler`] weights a patch.
@@ -167,9 +172,9 @@ const LOBE_ROUGHNESS: [f32; 3] = [0.08, 0.16, 0.32];
 
 /// The lobe grid of each of [`LOBE_ROUGHNESS`], in halves of
 /// [`ProductOptions::lobe_grid`]: narrower lobes need finer grids, as a shading
-/// point mixes tables about its four neighbouring nodes (16, 12 and 8 cells a side
-/// by default; nodes about 13°, 17° and 25° apart).
-const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 2];
+/// point mixes tables about its four neighbouring nodes (16, 12 and 12 cells a side
+/// by default; nodes about 13°, 17° and 17° apart: the widest lobe at 8 cells, nodes 25° apart, lost 0.03–0.05 of its efficiency on a constant map).
+const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 3];
 
 /// Glossy factors this rough or rougher sample from the cosine's tables: their
 /// lobe is wide enough that the cosine is the better part of the product.
@@ -258,6 +263,8 @@ pub struct ProductSampler {
     on_the_fly: bool,
     /// [`ProductOptions::fold_without_mirror`].
     fold_without_mirror: bool,
+    /// [`ProductOptions::glossy_without_tilt`].
+    glossy_without_tilt: bool,
 }
 
 impl ProductSampler {
@@ -292,6 +299,7 @@ impl ProductSampler {
             bound: options.bound,
             on_the_fly: options.on_the_fly,
             fold_without_mirror: options.fold_without_mirror,
+            glossy_without_tilt: options.glossy_without_tilt,
         }
     }
 
@@ -507,10 +515,54 @@ impl ProductSampler {
                     .take_while(|pair| roughness * roughness >= pair[0] * pair[1])
                     .count();
                 let mirror = reflect(outgoing, normal);
-                (set, self.light.world_to_local(mirror))
+                let lookup = if self.glossy_without_tilt {
+                    mirror
+                } else {
+                    tilted_mirror(mirror, normal, roughness)
+                };
+                (set, self.light.world_to_local(lookup))
             }
         }
     }
+}
+
+/// How far [`tilted_mirror`] may turn a glossy factor's lookup, per unit of
+/// roughness, in units of `tan(θo / 2)`.
+const TILT_GAIN: f32 = 1.75;
+
+/// The direction a glossy factor's lobe tables are looked up at: the mirror
+/// direction `r` turned towards the normal `n` by the angle `ψ` with
+/// `tan ψ = min(2 α² tan θo, TILT_GAIN · α · tan(θo / 2))`, `θo` the angle
+/// between them.
+///
+/// The lobe tables weight a patch by the lobe `D_α(r·ω)` alone; the factor is
+/// `cos⁺(n·ω) · D_α(r·ω)`, whose mass lies towards the normal from `r`, the more so
+/// the wider the lobe and the lower `r` (a lobe at grazing angles is cut by the
+/// horizon and weighted up towards the normal). Turning the lookup carries that
+/// first-order effect of the cosine into the choice of tables. For small angles
+/// the peak of the factor in the plane of `r` and `n` lies at `ψ ≈ α² tan θo` from
+/// `r` (where the lobe's log-slope `-ψ / (α² + ψ² / 4)` meets the cosine's
+/// `tan(θo − ψ)`), and the factor's mass lies further: twice that was best for
+/// narrow lobes, the second bound for wide lobes at grazing angles, on a constant
+/// map over α 0.05–0.4 and `θo` 0–85° (BENCHMARKS.md, "Glossy tables and the
+/// cosine under the lobe"). `ψ < θo / 2`, since `TILT_GAIN · α < 1` below
+/// `COSINE_FROM_ROUGHNESS`. A deterministic function of the factor, so the pdf
+/// stays exact.
+///
+/// With `t = n − (n·r) r` (length `sin θo`), the lookup is `r + μ t` normalised,
+/// `tan ψ = μ sin θo`: `μ = 2 α² / cos θo` or `TILT_GAIN · α / (1 + cos θo)`
+/// (`tan(θo / 2) = sin θo / (1 + cos θo)`), whichever is less. No trigonometry.
+fn tilted_mirror(mirror: Vec3, normal: Vec3, roughness: f32) -> Vec3 {
+    let cos_o = normal.dot(mirror).clamp(0.0, 1.0);
+    let (narrow, wide) = (2.0 * roughness * roughness, TILT_GAIN * roughness);
+    // min(narrow / cos_o, wide / (1 + cos_o)), without dividing by a zero cos_o.
+    let mu = if narrow * (1.0 + cos_o) < wide * cos_o {
+        narrow / cos_o
+    } else {
+        wide / (1.0 + cos_o)
+    };
+    let side = normal - mirror * cos_o;
+    (mirror + side * mu).normalized().unwrap_or(mirror)
 }
 
 /// The bright patches' weights at a shading point: on the stack for the default

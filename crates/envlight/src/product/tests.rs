@@ -796,15 +796,16 @@ fn product_beats_the_light_alone() {
     let up = Vec3::new(0.0, 0.0, 1.0);
     for (name, image, factor, at_least) in [
         ("constant", &constant, Factor::cosine(tilted), 0.9),
-        // A glossy factor's tables follow the lobe about the mirror direction
-        // but not the cosine, which falls from 0.86 to 0.22 across this lobe
-        // (its mirror direction is 54° from the normal): 0.64 measured (with the
-        // lobe grid at 16 cells a side: 0.66).
+        // A glossy factor's tables follow the lobe; the cosine, which falls
+        // from 0.86 to 0.22 across this lobe (its mirror direction is 54° from
+        // the normal), only through the lookup turned towards the normal: 0.75
+        // measured (0.64 with the lookup at the mirror direction and the widest
+        // lobe's grid at 8 cells a side).
         (
             "constant",
             &constant,
             Factor::glossy(tilted, Vec3::new(-0.5, 0.1, 0.7), 0.3),
-            0.6,
+            0.7,
         ),
         ("sky", &sky, Factor::cosine(up), 0.5),
         ("sky", &sky, Factor::cosine(Vec3::new(1.0, 0.0, 0.2)), 0.5),
