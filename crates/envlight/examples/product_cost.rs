@@ -12,6 +12,8 @@
 //! - per GGX roughness, with the default options: the glossy tables' build (on
 //!   first use) and a new glossy shading point (random normal and outgoing
 //!   direction above it), one sample and one pdf.
+//!
+//! `GLOSSY_ONLY=1` skips the grid rows (to profile the glossy points alone).
 
 use envlight::load::{load, LoadOptions};
 use envlight::{

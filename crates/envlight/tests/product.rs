@@ -449,7 +449,8 @@ fn grazing_glossy_below(options: ProductOptions, floor: f64) -> Vec<(f32, f32, f
         let at = AtShadingPoint::new(&sampler, Factor::glossy(n, outgoing, alpha));
         let e = verify::efficiency(&at, &at.integrand(), Reference::Midpoint);
         println!("α {alpha}, θo {degrees}°: efficiency {:.3}", e.efficiency);
-        if !(e.efficiency >= floor) {
+        // A NaN efficiency counts as below.
+        if e.efficiency.is_nan() || e.efficiency < floor {
             below.push((alpha, degrees, e.efficiency));
         }
     }

@@ -101,9 +101,10 @@ pub struct ProductOptions {
     /// [`ProductOptions::DEFAULT_NORMAL_GRID`]. Finer grids bound the cosine over
     /// smaller neighbourhoods: fewer samples where it is small, more memory.
     pub normal_grid: Option<usize>,
-    /// Cells per side of the grid of mirror directions of the widest glossy
-    /// roughness's tables (the narrower ones use 1.5 and 2 times as many). `None`
-    /// for [`ProductOptions::DEFAULT_LOBE_GRID`].
+    /// The scale of the glossy tables' grids of mirror directions: the tables of
+    /// the two widest roughnesses have 1.5 times this many cells a side, those of
+    /// the narrowest twice as many. `None` for
+    /// [`ProductOptions::DEFAULT_LOBE_GRID`].
     pub lobe_grid: Option<usize>,
     /// Every lit patch weighted at each shading point by the factor itself (as the
     /// bright patches are), none through the tables: an on-the-fly product over the
@@ -124,7 +125,8 @@ pub struct ProductOptions {
     pub fold_without_mirror: bool,
     /// Whether a glossy factor looks its lobe's tables up at the mirror direction
     /// itself, ignoring the cosine under the lobe: never except in a test that
-    /// proves an efficiency check catches it (see [`tilted_mirror`]).
+    /// proves an efficiency check catches it (the lookup is otherwise turned
+    /// towards the normal: `tilted_mirror` in the source).
     #[doc(hidden)]
     pub glossy_without_tilt: bool,
 }
@@ -173,7 +175,8 @@ const LOBE_ROUGHNESS: [f32; 3] = [0.08, 0.16, 0.32];
 /// The lobe grid of each of [`LOBE_ROUGHNESS`], in halves of
 /// [`ProductOptions::lobe_grid`]: narrower lobes need finer grids, as a shading
 /// point mixes tables about its four neighbouring nodes (16, 12 and 12 cells a side
-/// by default; nodes about 13°, 17° and 17° apart: the widest lobe at 8 cells, nodes 25° apart, lost 0.03–0.05 of its efficiency on a constant map).
+/// by default; nodes about 13°, 17° and 17° apart). The widest lobe lost 0.03–0.05
+/// of its efficiency on a constant map at 8 cells (nodes 25° apart).
 const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 3];
 
 /// Glossy factors this rough or rougher sample from the cosine's tables: their
