@@ -24,7 +24,7 @@ class EnvironmentLight:
         path: Union[str, PathLike[str]],
         *,
         sampler: _Sampler = "inversion",
-        density: _Density = "piecewise-constant",
+        density: Optional[_Density] = None,
         mapping: _Mapping = "equirectangular",
         lookup: _Lookup = "bilinear",
         rotate: float = 0.0,
@@ -33,6 +33,11 @@ class EnvironmentLight:
         table_width: Optional[int] = None,
     ) -> None:
         """Loads a map (.hdr, .exr, .pfm, or 8-bit .png/.jpg).
+
+        density: None (the default) takes "piecewise-bilinear" with the
+        inversion sampler and no table_width, else "piecewise-constant" (the
+        only density the alias and hierarchical samplers and a reduced table
+        take).
 
         table_width: build the sampling table this many cells wide instead of one
         cell per texel (each cell sums a block of texels' filtered importance, so
@@ -48,7 +53,7 @@ class EnvironmentLight:
         rgb: _F32,
         *,
         sampler: _Sampler = "inversion",
-        density: _Density = "piecewise-constant",
+        density: Optional[_Density] = None,
         mapping: _Mapping = "equirectangular",
         lookup: _Lookup = "bilinear",
         rotate: float = 0.0,

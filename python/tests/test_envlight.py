@@ -224,7 +224,7 @@ def test_options():
         assert np.allclose(light.pdf(d), p, rtol=1e-3), kw
     reduced = envlight.EnvironmentLight.from_array(rgb, table_width=rgb.shape[1] // 4)
     assert reduced.table_size == (rgb.shape[1] // 4, rgb.shape[0] // 4)
-    full = envlight.EnvironmentLight.from_array(rgb)
+    full = envlight.EnvironmentLight.from_array(rgb, density="piecewise-constant")
     assert full.table_size == (rgb.shape[1], rgb.shape[0]) and full.full_table_efficiency is None
     assert reduced.efficiency < reduced.full_table_efficiency
     assert abs(reduced.full_table_efficiency / full.efficiency - 1) < 1e-6
@@ -234,6 +234,18 @@ def test_options():
         envlight.EnvironmentLight.from_array(rgb, table_width=rgb.shape[1] - 1)
     with pytest.raises(ValueError, match="alias sampler has no inverse"):
         envlight.EnvironmentLight.from_array(rgb, sampler="alias").invert(np.zeros((1, 3), np.float32))
+
+
+def test_default_density_follows_the_sampler():
+    rgb = sky()
+    default = envlight.EnvironmentLight.from_array
+    assert "piecewise-bilinear" in repr(default(rgb))
+    assert "piecewise-constant" in repr(default(rgb, sampler="alias"))
+    assert "piecewise-constant" in repr(default(rgb, sampler="hierarchical"))
+    assert "piecewise-constant" in repr(default(rgb, table_width=rgb.shape[1] // 2))
+    assert "piecewise-constant" in repr(default(rgb, density="piecewise-constant"))
+    with pytest.raises(ValueError, match="inversion only"):
+        default(rgb, sampler="alias", density="piecewise-bilinear")
 
 
 def test_errors(tmp_path):
@@ -284,7 +296,11 @@ def test_real_map():
     light = envlight.EnvironmentLight(ENVMAPS / "sunrise.exr")
     d, p, _ = light.sample(uniform_u(10000))
     assert np.allclose(light.pdf(d), p, rtol=1e-3)
-    assert 0.7 < light.efficiency < 0.9
+    # The default bilinear density follows the bilinear lookup: efficiency 1;
+    # the piecewise-constant density's is lower on this map (0.79).
+    assert light.efficiency > 0.999
+    constant = envlight.EnvironmentLight(ENVMAPS / "sunrise.exr", density="piecewise-constant")
+    assert 0.7 < constant.efficiency < 0.9
 
 
 def test_pooled_outputs_are_independent_and_recycled():

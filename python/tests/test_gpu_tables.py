@@ -60,7 +60,7 @@ def check_tables_buffer(t):
 
 def test_shapes_dtypes_and_the_map():
     rgb = small_map()
-    light = envlight.EnvironmentLight.from_array(rgb, scale=2.0)
+    light = envlight.EnvironmentLight.from_array(rgb, scale=2.0, density="piecewise-constant")
     t = light.gpu_tables()
     assert t["version"] == 1
     assert set(t) == {

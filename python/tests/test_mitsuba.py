@@ -117,13 +117,14 @@ def table_rows(tl, u, q):
 
 CONFIGS = [
     {},
-    {"density": "piecewise-bilinear"},
+    {"density": "piecewise-constant"},
     {"mapping": "equal-area"},
+    {"mapping": "equal-area", "density": "piecewise-constant"},
     {"lookup": "nearest"},
     {"rotate": 37.0, "scale": 2.5},
     {"table_width": 16},
-    {"lookup": "node"},
-    {"lookup": "node", "rotate": 80.0},
+    {"lookup": "node", "density": "piecewise-constant"},
+    {"lookup": "node", "density": "piecewise-constant", "rotate": 80.0},
     {"lookup": "node", "density": "piecewise-bilinear"},
     {"lookup": "node", "density": "piecewise-bilinear", "rotate": 80.0},
 ]
@@ -175,11 +176,11 @@ def test_a_wrong_table_is_rejected(variant):
 
 PRODUCT_CONFIGS = [
     {},
-    {"density": "piecewise-bilinear"},
+    {"density": "piecewise-constant"},
     {"mapping": "equal-area"},
-    {"mapping": "equal-area", "density": "piecewise-bilinear"},
+    {"mapping": "equal-area", "density": "piecewise-constant"},
     {"rotate": 37.0},
-    {"lookup": "node"},
+    {"lookup": "node", "density": "piecewise-constant"},
     {"lookup": "node", "density": "piecewise-bilinear"},
     {"lookup": "node", "density": "piecewise-bilinear", "rotate": 80.0},
 ]

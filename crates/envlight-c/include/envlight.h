@@ -112,11 +112,14 @@ enum envlight_density
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
   /**
-   * Constant over each texel (the default).
+   * Constant over each texel: the smallest and cheapest, and the only density
+   * of the alias and hierarchical samplers and of a reduced table
+   * (`table_width`).
    */
   ENVLIGHT_DENSITY_PIECEWISE_CONSTANT = 0,
   /**
-   * Bilinear between texel centres (inversion sampler only).
+   * Bilinear between texel centres (inversion sampler only; the default of
+   * `envlight_light_options_default`): follows the bilinear lookup.
    */
   ENVLIGHT_DENSITY_PIECEWISE_BILINEAR = 1,
 };
@@ -517,9 +520,10 @@ size_t envlight_last_error(char *buf, size_t len);
 const char *envlight_status_name(uint32_t status);
 
 /**
- * The default options: inversion sampler, piecewise-constant density,
+ * The default options: inversion sampler, piecewise-bilinear density,
  * equirectangular mapping and input, bilinear lookup, no rotation, scale 1, one
- * table cell per texel.
+ * table cell per texel. With the alias or hierarchical sampler or a
+ * `table_width`, set the density to `ENVLIGHT_DENSITY_PIECEWISE_CONSTANT` too.
  */
 struct envlight_light_options envlight_light_options_default(void);
 

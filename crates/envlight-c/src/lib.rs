@@ -117,9 +117,12 @@ pub enum envlight_sampler {
 #[repr(u32)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum envlight_density {
-    /// Constant over each texel (the default).
+    /// Constant over each texel: the smallest and cheapest, and the only density
+    /// of the alias and hierarchical samplers and of a reduced table
+    /// (`table_width`).
     ENVLIGHT_DENSITY_PIECEWISE_CONSTANT = 0,
-    /// Bilinear between texel centres (inversion sampler only).
+    /// Bilinear between texel centres (inversion sampler only; the default of
+    /// `envlight_light_options_default`): follows the bilinear lookup.
     ENVLIGHT_DENSITY_PIECEWISE_BILINEAR = 1,
 }
 
@@ -567,14 +570,15 @@ pub extern "C" fn envlight_status_name(status: u32) -> *const c_char {
 // Building a light.
 // ---------------------------------------------------------------------------
 
-/// The default options: inversion sampler, piecewise-constant density,
+/// The default options: inversion sampler, piecewise-bilinear density,
 /// equirectangular mapping and input, bilinear lookup, no rotation, scale 1, one
-/// table cell per texel.
+/// table cell per texel. With the alias or hierarchical sampler or a
+/// `table_width`, set the density to `ENVLIGHT_DENSITY_PIECEWISE_CONSTANT` too.
 #[no_mangle]
 pub extern "C" fn envlight_light_options_default() -> envlight_light_options {
     envlight_light_options {
         sampler: envlight_sampler::ENVLIGHT_SAMPLER_INVERSION as u32,
-        density: envlight_density::ENVLIGHT_DENSITY_PIECEWISE_CONSTANT as u32,
+        density: envlight_density::ENVLIGHT_DENSITY_PIECEWISE_BILINEAR as u32,
         mapping: envlight_mapping::ENVLIGHT_MAPPING_EQUIRECTANGULAR as u32,
         input_mapping: envlight_mapping::ENVLIGHT_MAPPING_EQUIRECTANGULAR as u32,
         lookup: envlight_lookup::ENVLIGHT_LOOKUP_BILINEAR as u32,

@@ -161,6 +161,38 @@ fn info_json_on_builtin_sky() {
     assert!((z - 35f64.to_radians().sin()).abs() < 0.02, "{z}");
 }
 
+/// Without `--density`, the light takes the piecewise-bilinear density with the
+/// inversion sampler at full size, and the piecewise-constant one (the only one
+/// they take) with the other samplers and `--table-size`; an explicit bilinear
+/// density with them stays a usage error.
+#[test]
+fn the_default_density_follows_the_sampler() {
+    let density = |args: &[&str]| info_json(args)["density"].as_str().unwrap().to_owned();
+    assert_eq!(density(&[]), "piecewise-bilinear");
+    assert_eq!(density(&["--sampler", "alias"]), "piecewise-constant");
+    assert_eq!(
+        density(&["--sampler", "hierarchical"]),
+        "piecewise-constant"
+    );
+    assert_eq!(density(&["--table-size", "512"]), "piecewise-constant");
+    assert_eq!(
+        density(&["--density", "piecewise-constant"]),
+        "piecewise-constant"
+    );
+    let out = envlight()
+        .args([
+            "info",
+            "--sampler",
+            "alias",
+            "--density",
+            "piecewise-bilinear",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--density piecewise-bilinear"));
+}
+
 /// `--table-size`: info reports the table and what it costs; a width that does
 /// not divide the map, zero, and the bilinear density are usage errors (exit 2)
 /// naming the option; sampling works with a reduced table.
@@ -176,7 +208,7 @@ fn table_size_is_reported_and_checked() {
         v["full_table_efficiency"].as_f64().unwrap(),
     );
     assert!(0.0 < own && own < full && full <= 1.0, "{own} {full}");
-    let plain = info_json(&[]);
+    let plain = info_json(&["--density", "piecewise-constant"]);
     assert!(plain["full_table_efficiency"].is_null());
     assert_eq!(plain["table_width"].as_u64(), Some(1024));
     assert!((plain["efficiency"].as_f64().unwrap() - full).abs() < 1e-6);
@@ -1651,7 +1683,8 @@ fn export_writes_gpu_tables_of_builtin_sky() {
     assert_eq!(tables.radiance_format(), RadianceFormat::F32);
     let p = tables.params();
     assert_eq!(p[param::VERSION], 1);
-    assert_eq!((p[param::SAMPLER], p[param::DENSITY]), (0, 0));
+    // The default light: inversion, piecewise-bilinear.
+    assert_eq!((p[param::SAMPLER], p[param::DENSITY]), (0, 1));
     // The same tables as the library builds for the same light.
     let light = envlight::EnvironmentLight::new(
         envlight::builtin::by_name("sky").unwrap(),

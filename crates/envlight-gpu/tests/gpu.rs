@@ -182,6 +182,7 @@ fn rotation_scale_compensation_and_reduced_tables_agree() {
     let base = LightOptions {
         rotation: Rotation::about_z_degrees(37.0),
         scale: 2.5,
+        density: Density::PiecewiseConstant,
         ..Default::default()
     };
     let cases = [
@@ -197,6 +198,7 @@ fn rotation_scale_compensation_and_reduced_tables_agree() {
             "MIS-compensated",
             LightOptions {
                 mis_compensation: true,
+                density: Density::PiecewiseConstant,
                 ..Default::default()
             },
         ),
@@ -204,6 +206,7 @@ fn rotation_scale_compensation_and_reduced_tables_agree() {
             "table 24 wide",
             LightOptions {
                 table_width: Some(24),
+                density: Density::PiecewiseConstant,
                 ..Default::default()
             },
         ),
@@ -212,6 +215,7 @@ fn rotation_scale_compensation_and_reduced_tables_agree() {
             LightOptions {
                 sampler: Sampler::Alias,
                 table_width: Some(24),
+                density: Density::PiecewiseConstant,
                 ..Default::default()
             },
         ),
@@ -308,6 +312,7 @@ fn real_maps_agree() {
                 "alias",
                 LightOptions {
                     sampler: Sampler::Alias,
+                    density: Density::PiecewiseConstant,
                     ..Default::default()
                 },
             ),
@@ -346,6 +351,7 @@ fn the_harness_passes_on_gpu_output() {
             LightOptions {
                 sampler: Sampler::Alias,
                 mapping: Mapping::EqualArea,
+                density: Density::PiecewiseConstant,
                 ..Default::default()
             },
         ),
@@ -383,7 +389,11 @@ fn broken(what: &str, with: &str) -> String {
 #[test]
 fn broken_shaders_are_rejected() {
     let Some(device) = device() else { return };
-    let light = EnvironmentLight::new(sun_sky(64, 32), LightOptions::default()).unwrap();
+    let options = LightOptions {
+        density: Density::PiecewiseConstant,
+        ..Default::default()
+    };
+    let light = EnvironmentLight::new(sun_sky(64, 32), options).unwrap();
     let tables = light.gpu_tables(&GpuTableOptions::default()).unwrap();
     // Every pdf of the piecewise-constant density (the light's) 1% too large.
     let scaled = broken(

@@ -65,7 +65,7 @@ impl Frame {
 #[allow(clippy::too_many_arguments)]
 fn light_options(
     sampler: &str,
-    density: &str,
+    density: Option<&str>,
     mapping: &str,
     lookup: &str,
     rotate: f32,
@@ -73,7 +73,11 @@ fn light_options(
     table_width: Option<usize>,
 ) -> PyResult<LightOptions> {
     let sampler = choose("sampler", sampler, &Sampler::ALL, |s| s.name())?;
-    let density = choose("density", density, &Density::ALL, |d| d.name())?;
+    // No density given: the library's default for the sampler and table.
+    let density = match density {
+        Some(density) => choose("density", density, &Density::ALL, |d| d.name())?,
+        None => Density::default_for(sampler, table_width),
+    };
     let mapping = choose("mapping", mapping, &Mapping::ALL, |m| m.name())?;
     let lookup = choose(
         "lookup",
@@ -518,13 +522,13 @@ fn as_triples_mut(values: &mut [f32]) -> &mut [[f32; 3]] {
 #[pymethods]
 impl PyEnvironmentLight {
     #[new]
-    #[pyo3(signature = (path, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
+    #[pyo3(signature = (path, *, sampler="inversion", density=None, mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         path: std::path::PathBuf,
         sampler: &str,
-        density: &str,
+        density: Option<&str>,
         mapping: &str,
         lookup: &str,
         rotate: f32,
@@ -552,13 +556,13 @@ impl PyEnvironmentLight {
     /// A light from an `(H, W, 3)` float32 array of linear RGB radiance, row 0 at
     /// the top (θ = 0), column 0 at φ = 0.
     #[staticmethod]
-    #[pyo3(signature = (rgb, *, sampler="inversion", density="piecewise-constant", mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
+    #[pyo3(signature = (rgb, *, sampler="inversion", density=None, mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_array(
         py: Python<'_>,
         rgb: &Bound<'_, PyAny>,
         sampler: &str,
-        density: &str,
+        density: Option<&str>,
         mapping: &str,
         lookup: &str,
         rotate: f32,

@@ -10,6 +10,7 @@
 //! `info`; `examples/efficiency_convergence.rs` shows the whole table on the shared
 //! maps, and this test the same law on the built-in sky.
 
+use envlight::light::Density;
 use envlight::{
     builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
 };
@@ -36,7 +37,14 @@ fn midpoint_efficiency(at: &AtShadingPoint, size: [usize; 2], n: Vec3, m: usize)
 fn midpoint_efficiency_converges_to_the_checked_rule() {
     let image = builtin::sky(256, 128);
     let size = [image.width(), image.height()];
-    let light = Arc::new(EnvironmentLight::new(image, LightOptions::default()).unwrap());
+    // The piecewise-constant density, whose product pdf is constant per texel
+    // (the bilinear one's follows `Y` and leaves the midpoint rule no curvature
+    // to miss).
+    let options = LightOptions {
+        density: Density::PiecewiseConstant,
+        ..Default::default()
+    };
+    let light = Arc::new(EnvironmentLight::new(image, options).unwrap());
     let sampler = ProductSampler::new(light.clone(), ProductOptions::default());
     let n = light.brightest().1;
     let at = AtShadingPoint::new(&sampler, Factor::cosine(n));

@@ -9,7 +9,7 @@ mod baseline;
 
 use baseline::BaselineLight;
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
-use envlight::light::Sampler;
+use envlight::light::{Density, Sampler};
 use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Lookup, Vec3};
 use std::hint::black_box;
 use std::sync::OnceLock;
@@ -30,6 +30,7 @@ fn light(width: usize, lookup: Lookup, sampler: Sampler) -> EnvironmentLight {
     let options = LightOptions {
         lookup,
         sampler,
+        density: Density::PiecewiseConstant,
         ..Default::default()
     };
     EnvironmentLight::new(sky(width).clone(), options).unwrap()

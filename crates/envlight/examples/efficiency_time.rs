@@ -7,6 +7,7 @@
 #[path = "common/sun_sky.rs"]
 mod sun_sky;
 
+use envlight::light::Density;
 use envlight::{EnvironmentLight, LightOptions};
 use std::time::Instant;
 
@@ -19,6 +20,7 @@ fn main() {
     for table_width in [None, Some(width / 4)] {
         let options = LightOptions {
             table_width,
+            density: Density::PiecewiseConstant,
             ..Default::default()
         };
         let light = EnvironmentLight::new(image.clone(), options).expect("a light");

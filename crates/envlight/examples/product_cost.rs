@@ -13,8 +13,11 @@
 //!   first use) and a new glossy shading point (random normal and outgoing
 //!   direction above it), one sample and one pdf.
 //!
-//! `GLOSSY_ONLY=1` skips the grid rows (to profile the glossy points alone).
+//! `GLOSSY_ONLY=1` skips the grid rows (to profile the glossy points alone);
+//! `CONSTANT=1` builds the light with the piecewise-constant density instead of
+//! the default piecewise-bilinear one.
 
+use envlight::light::Density;
 use envlight::load::{load, LoadOptions};
 use envlight::{
     builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
@@ -35,7 +38,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(path) => load(path.as_ref(), &LoadOptions::default())?.image,
         None => builtin::sky(1024, 512),
     };
-    let light = Arc::new(EnvironmentLight::new(image, LightOptions::default())?);
+    let density = if std::env::var_os("CONSTANT").is_some() {
+        Density::PiecewiseConstant
+    } else {
+        Density::PiecewiseBilinear
+    };
+    let options = LightOptions {
+        density,
+        ..Default::default()
+    };
+    let light = Arc::new(EnvironmentLight::new(image, options)?);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let mut rng = envlight::rng::SplitMix64::new(7);
     let normals: Vec<Vec3> = (0..POINTS)

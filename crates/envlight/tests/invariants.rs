@@ -21,11 +21,15 @@ use std::path::{Path, PathBuf};
 // Lights over the synthetic maps of `envlight_verify::maps`.
 // ---------------------------------------------------------------------------
 
+/// A light over `image` with `lookup` and the piecewise-constant density (the
+/// checks below that name no density are about it; the bilinear one, the
+/// default, has its own cases in the table further down).
 fn light(image: EnvImage, lookup: Lookup) -> EnvironmentLight {
     EnvironmentLight::new(
         image,
         LightOptions {
             lookup,
+            density: Density::PiecewiseConstant,
             ..Default::default()
         },
     )
@@ -38,6 +42,7 @@ fn rotated(image: EnvImage, lookup: Lookup, degrees: f32) -> EnvironmentLight {
         LightOptions {
             lookup,
             rotation: Rotation::about_z_degrees(degrees),
+            density: Density::PiecewiseConstant,
             ..Default::default()
         },
     )
@@ -206,6 +211,7 @@ fn table(
             lookup,
             sampler,
             table_width: Some(table_width),
+            density: Density::PiecewiseConstant,
             ..Default::default()
         },
     )

@@ -122,8 +122,7 @@ int main(int argc, char **argv) {
     expect("table width that does not divide", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
            ENVLIGHT_ERROR_INVALID_ARGUMENT, "3");
     options = envlight_light_options_default();
-    options.density = ENVLIGHT_DENSITY_PIECEWISE_BILINEAR;
-    options.sampler = ENVLIGHT_SAMPLER_ALIAS;
+    options.sampler = ENVLIGHT_SAMPLER_ALIAS; /* with the default, bilinear density */
     expect("bilinear density with alias", envlight_light_from_rgb(rgb, 8, 4, &options, &light),
            ENVLIGHT_ERROR_INVALID_ARGUMENT, "alias");
 
@@ -174,6 +173,7 @@ int main(int argc, char **argv) {
                ENVLIGHT_ERROR_INVALID_ARGUMENT, "len");
         envlight_sun_extraction_free(sun);
         options.sampler = ENVLIGHT_SAMPLER_HIERARCHICAL;
+        options.density = ENVLIGHT_DENSITY_PIECEWISE_CONSTANT;
         envlight_light_free(light);
         expect("hierarchical light", envlight_light_from_rgb(rgb, 8, 4, &options, &light), ENVLIGHT_OK,
                NULL);

@@ -142,6 +142,7 @@ fn gpu_round_trip_of_every_supported_combination() {
 fn gpu_hierarchical_sampler_is_refused() {
     let options = LightOptions {
         sampler: Sampler::Hierarchical,
+        density: Density::PiecewiseConstant,
         ..Default::default()
     };
     let light = EnvironmentLight::new(map(16, 8), options).unwrap();
@@ -366,7 +367,12 @@ fn rejected(bytes: &[u8], needle: &str) {
 
 #[test]
 fn gpu_corrupt_files_are_rejected_with_clear_errors() {
-    let light = EnvironmentLight::new(map(16, 8), LightOptions::default()).unwrap();
+    // The piecewise-constant layout, whose sections the offsets below name.
+    let options = LightOptions {
+        density: Density::PiecewiseConstant,
+        ..Default::default()
+    };
+    let light = EnvironmentLight::new(map(16, 8), options).unwrap();
     let t = tables(&light);
     let good = t.to_bytes();
     let sections = t.sections();
@@ -459,6 +465,7 @@ fn gpu_corrupt_files_are_rejected_with_clear_errors() {
         map(16, 8),
         LightOptions {
             sampler: Sampler::Alias,
+            density: Density::PiecewiseConstant,
             ..Default::default()
         },
     )

@@ -52,7 +52,8 @@ impl EnvironmentLight {
         }
         if options.density == Density::PiecewiseBilinear && options.sampler != Sampler::Inversion {
             return Err(Error::InvalidOption(format!(
-                "the piecewise-bilinear density is sampled by inversion only, not by the {} sampler",
+                "the piecewise-bilinear density (the default) is sampled by inversion only, \
+                 not by the {} sampler: ask for the piecewise-constant density with it",
                 options.sampler.name()
             )));
         }
@@ -141,7 +142,11 @@ pub fn table_reduction(w: usize, h: usize, options: &LightOptions) -> Result<usi
         ));
     }
     if table != w && options.density != Density::PiecewiseConstant {
-        return bad("a reduced table needs the piecewise-constant density".into());
+        return bad(
+            "a reduced table needs the piecewise-constant density (the default is \
+             piecewise-bilinear: ask for piecewise-constant with a table width)"
+                .into(),
+        );
     }
     Ok(w / table)
 }
@@ -807,12 +812,17 @@ mod tests {
     #[test]
     fn full_table_efficiency_matches_the_full_light() {
         let image = crate::builtin::sky(96, 48);
-        let full = EnvironmentLight::new(image.clone(), LightOptions::default()).unwrap();
+        let constant = LightOptions {
+            density: Density::PiecewiseConstant,
+            ..Default::default()
+        };
+        let full = EnvironmentLight::new(image.clone(), constant).unwrap();
         assert_eq!(full.efficiency_with_full_table(), (full.efficiency(), None));
         for (table_width, sampler) in [(48, Sampler::Inversion), (24, Sampler::Alias)] {
             let options = LightOptions {
                 table_width: Some(table_width),
                 sampler,
+                density: Density::PiecewiseConstant,
                 ..Default::default()
             };
             let reduced = EnvironmentLight::new(image.clone(), options).unwrap();
@@ -843,7 +853,11 @@ mod tests {
             })
             .collect();
         let image = EnvImage::new(w, h, texels).unwrap();
-        let full = EnvironmentLight::new(image.clone(), LightOptions::default()).unwrap();
+        let constant = LightOptions {
+            density: Density::PiecewiseConstant,
+            ..Default::default()
+        };
+        let full = EnvironmentLight::new(image.clone(), constant).unwrap();
         let mut importance = vec![0.0f32; w * h];
         full.importance_rows(0, &mut importance);
         for r in [1, 2, 3, 4, 6, 12] {
@@ -851,6 +865,7 @@ mod tests {
                 let options = LightOptions {
                     sampler,
                     table_width: Some(w / r),
+                    density: Density::PiecewiseConstant,
                     ..Default::default()
                 };
                 let light = EnvironmentLight::new(image.clone(), options).unwrap();
@@ -883,6 +898,7 @@ mod tests {
             table_width: Some(w / 4),
             mis_compensation: true,
             sampler: Sampler::Alias,
+            density: Density::PiecewiseConstant,
             ..Default::default()
         };
         let light = EnvironmentLight::new(image.clone(), options).unwrap();

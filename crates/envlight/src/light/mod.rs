@@ -1,7 +1,7 @@
 //! The environment light: an HDR image at infinity, importance sampled in
 //! proportion to its luminance.
 //!
-//! Construction (DESIGN.md §4), for the default piecewise-constant density:
+//! Construction (DESIGN.md §4), for the piecewise-constant density:
 //! 1. importance `f[j][i] = Y(filtered radiance of texel (i, j)) · J_j`, where `J_j`
 //!    is the mapping's area factor at the row centre (`sin θ_j` for the
 //!    equirectangular map, 1 for the equal-area square). For bilinear lookups the
@@ -11,7 +11,7 @@
 //!    lookups need no filter.
 //! 2. a 2D sampler over `f` ([`Sampler`]).
 //!
-//! The piecewise-bilinear density instead puts `Y · J` at the nodes of the
+//! The piecewise-bilinear density (the default) instead puts `Y · J` at the nodes of the
 //! lookup's reconstruction (the texel centres; for [`Lookup::Node`], the rows from
 //! pole to pole along v) and samples the bilinear interpolation of those values,
 //! so `L / p` is nearly constant.
@@ -63,17 +63,25 @@ pub enum Sampler {
 }
 
 /// The shape of the sampling density over the image.
+///
+/// The default is [`Density::PiecewiseBilinear`]: it follows the bilinear
+/// radiance lookup, so its efficiency (BENCHMARKS.md) is 1.000 on every shared
+/// map, for a batch sample and pdf that cost 1.0–1.6× the piecewise-constant
+/// density's. The alias and hierarchical samplers and a reduced table
+/// ([`LightOptions::table_width`]) take the piecewise-constant density only;
+/// [`Density::default_for`] picks the density for a sampler and table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Density {
     /// Constant over each texel (the seed's): `f[j][i]` as in the module docs.
-    #[default]
+    /// The smallest (6 bytes per texel against about 14) and cheapest to sample.
     PiecewiseConstant,
     /// Bilinear between the lookup's nodes (texel centres; along v for
     /// [`Lookup::Node`], its rows from pole to pole), proportional to the bilinear
     /// radiance reconstruction times the mapping's area factor at the nodes (at
     /// the node lookup's pole rows, where that factor is 0, its mean over the half
     /// row next to the pole, so the density covers the radiance). Sampled by
-    /// inversion only.
+    /// inversion only. The default.
+    #[default]
     PiecewiseBilinear,
 }
 
@@ -109,6 +117,19 @@ impl Density {
         match self {
             Density::PiecewiseConstant => "piecewise-constant",
             Density::PiecewiseBilinear => "piecewise-bilinear",
+        }
+    }
+
+    /// The density a light takes when none is asked for: piecewise-bilinear for
+    /// the inversion sampler over a full-size table (`table_width` `None`), else
+    /// piecewise-constant, the only density the other samplers and reduced tables
+    /// take. The command line and the Python and C interfaces resolve an
+    /// unspecified density with this.
+    pub fn default_for(sampler: Sampler, table_width: Option<usize>) -> Density {
+        if sampler == Sampler::Inversion && table_width.is_none() {
+            Density::PiecewiseBilinear
+        } else {
+            Density::PiecewiseConstant
         }
     }
 }
@@ -192,7 +213,9 @@ pub struct LightOptions {
     pub lookup: Lookup,
     /// How directions are drawn from the density.
     pub sampler: Sampler,
-    /// The shape of the density.
+    /// The shape of the density (default: piecewise-bilinear; the alias and
+    /// hierarchical samplers and `table_width` need piecewise-constant, see
+    /// [`Density::default_for`]).
     pub density: Density,
     /// The parameterization the light samples and looks up in. A lat-long input
     /// with [`Mapping::EqualArea`] is resampled to an equal-area square.
@@ -232,7 +255,7 @@ impl Default for LightOptions {
             rotation: Rotation::IDENTITY,
             lookup: Lookup::Bilinear,
             sampler: Sampler::Inversion,
-            density: Density::PiecewiseConstant,
+            density: Density::PiecewiseBilinear,
             mapping: Mapping::Equirectangular,
             input_mapping: Mapping::Equirectangular,
             equal_area_size: None,
@@ -766,6 +789,7 @@ mod tests {
                         mapping,
                         rotation: Rotation::about_z_degrees(rotate),
                         table_width,
+                        density: Density::PiecewiseConstant,
                         ..Default::default()
                     };
                     let Ok(light) = EnvironmentLight::new(image.clone(), options) else {
@@ -899,7 +923,11 @@ mod tests {
     #[test]
     fn constant_map_integrates_to_4pi_and_has_uniform_pdf() {
         let image = EnvImage::from_fn(16, 8, |_, _| [2.0, 2.0, 2.0]).unwrap();
-        let light = EnvironmentLight::new(image, LightOptions::default()).unwrap();
+        let options = LightOptions {
+            density: Density::PiecewiseConstant,
+            ..Default::default()
+        };
+        let light = EnvironmentLight::new(image, options).unwrap();
         let i = light.integral_rgb();
         assert!((i[0] - 8.0 * PI).abs() < 1e-6, "{i:?}");
         // Importance ∝ sin θ at row centres: pdf is uniform 1/4π up to the
@@ -928,6 +956,7 @@ mod tests {
         let options = LightOptions {
             rotation: Rotation::about_z_degrees(90.0),
             lookup: Lookup::Nearest,
+            density: Density::PiecewiseConstant,
             ..Default::default()
         };
         let light = EnvironmentLight::new(image, options).unwrap();
