@@ -53,7 +53,6 @@ pub(super) fn pdf_chunk(light: &EnvironmentLight, dirs: &[Vec3], out: &mut [f32]
     }
     let frame = Frame::of(light);
     let stride = _mm512_set1_epi32((t.nu + 1) as i32);
-    let one = _mm512_set1_epi32(1);
     let (nu, nv) = (_mm512_set1_ps(len_f32(t.nu)), _mm512_set1_ps(len_f32(t.nv)));
     let last = |n: usize| _mm512_set1_epi32((n - 1).min(i32::MAX as usize) as i32);
     let (last_u, last_v) = (last(t.nu), last(t.nv));
@@ -66,36 +65,31 @@ pub(super) fn pdf_chunk(light: &EnvironmentLight, dirs: &[Vec3], out: &mut [f32]
         let iu = floor_index(_mm512_mul_ps(u, nu), last_u);
         let iv = floor_index(_mm512_mul_ps(v, nv), last_v);
         let at = _mm512_add_epi32(_mm512_mullo_epi32(iv, stride), iu);
+        // Each cell's two conditional CDF entries are neighbours, and so are its
+        // row's two marginal ones: one 64-bit gather per pair and eight lanes,
+        // whose halves' difference is the width (CDFs never decrease).
         // SAFETY: iu < nu and iv < nv (floor_index clamps), so `at + 1` is inside
         // the nv (nu + 1) conditional entries and `iv + 1` inside the nv + 1
         // marginal ones; every index fits an i32 (checked above).
-        let (c0, c1, m0, m1) = unsafe {
-            (
-                _mm512_i32gather_epi32::<4>(at, cdf.cast()),
-                _mm512_i32gather_epi32::<4>(_mm512_add_epi32(at, one), cdf.cast()),
-                _mm512_i32gather_epi32::<4>(iv, marginal.cast()),
-                _mm512_i32gather_epi32::<4>(_mm512_add_epi32(iv, one), marginal.cast()),
-            )
+        let widths = |at: __m256i, table: *const u32| {
+            let pair = unsafe { _mm512_i32gather_epi64::<4>(at, table.cast()) };
+            let low = _mm512_and_si512(pair, _mm512_set1_epi64(u32::MAX as i64));
+            _mm512_cvtepi64_pd(_mm512_sub_epi64(_mm512_srli_epi64::<32>(pair), low))
         };
-        let (wu, wv) = (_mm512_sub_epi32(c1, c0), _mm512_sub_epi32(m1, m0));
         // (wu wv) pdf_scale in f64, rounded to f32 once, eight lanes at a time.
-        let half = |w: __m512i, upper: bool| {
-            let h = if upper {
-                _mm512_extracti64x4_epi64::<1>(w)
-            } else {
-                _mm512_castsi512_si256(w)
-            };
-            _mm512_cvtepu32_pd(h)
-        };
-        let planar_half = |upper: bool| {
+        let planar_half = |at: __m256i, iv: __m256i| {
             _mm512_cvtpd_ps(_mm512_mul_pd(
-                _mm512_mul_pd(half(wu, upper), half(wv, upper)),
+                _mm512_mul_pd(widths(at, cdf), widths(iv, marginal)),
                 scale,
             ))
         };
+        let (lower, upper) = (
+            |x: __m512i| _mm512_castsi512_si256(x),
+            |x: __m512i| _mm512_extracti64x4_epi64::<1>(x),
+        );
         let planar = _mm512_insertf32x8::<1>(
-            _mm512_castps256_ps512(planar_half(false)),
-            planar_half(true),
+            _mm512_castps256_ps512(planar_half(lower(at), lower(iv))),
+            planar_half(upper(at), upper(iv)),
         );
         store_solid_angle(out, planar, csc, infinity);
     }
@@ -444,22 +438,76 @@ pub(super) fn radiance_chunk(
             let at = _mm512_add_epi32(_mm512_mullo_epi32(y, wi), x);
             _mm512_add_epi32(_mm512_add_epi32(at, at), at)
         };
-        let corners = [texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1)];
-        let mut rgb = [zero; 3];
-        for (c, rgb) in rgb.iter_mut().enumerate() {
-            let channel = _mm512_set1_epi32(c as i32);
-            // SAFETY: x0, x1 < w and y0, y1 < h, so every corner's channel is
-            // inside the w h texels, and 3 w h fits an i32 (checked above).
-            let [a, b, c, d] = corners.map(|at| unsafe {
-                _mm512_i32gather_ps::<4>(_mm512_add_epi32(at, channel), texels.cast())
-            });
+        // The four corners' channels, `[corner][channel]`, corners in `blend`'s
+        // order. Where every lane's right column follows its left one (all but
+        // the lanes on the seam, x0 = w − 1), a row's two texels are six
+        // consecutive floats: three 64-bit gathers per eight lanes, split into
+        // channels by permutes (96 loads per 16 lanes); otherwise one 32-bit
+        // gather per corner and channel (192).
+        let consecutive = _mm512_cmpeq_epi32_mask(x1, _mm512_add_epi32(x0, one_i)) == !0;
+        let corners: [[__m512; 3]; 4] = if consecutive {
+            let [a, b] = row_pairs(texel(x0, y0), texels);
+            let [c, d] = row_pairs(texel(x0, y1), texels);
+            [a, b, c, d]
+        } else {
+            let at = [texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1)];
+            at.map(|at| {
+                [0, 1, 2].map(|c| {
+                    // SAFETY: x0, x1 < w and y0, y1 < h, so every corner's
+                    // channel is inside the w h texels, and 3 w h fits an i32
+                    // (checked above).
+                    unsafe {
+                        _mm512_i32gather_ps::<4>(
+                            _mm512_add_epi32(at, _mm512_set1_epi32(c)),
+                            texels.cast(),
+                        )
+                    }
+                })
+            })
+        };
+        let rgb: [__m512; 3] = std::array::from_fn(|c| {
+            let [a, b, cc, d] = corners.map(|corner| corner[c]);
             let near = _mm512_add_ps(_mm512_mul_ps(weights[0], a), _mm512_mul_ps(weights[1], b));
-            let far = _mm512_add_ps(_mm512_mul_ps(weights[2], c), _mm512_mul_ps(weights[3], d));
-            *rgb = _mm512_mul_ps(_mm512_add_ps(near, far), scale);
-        }
+            let far = _mm512_add_ps(_mm512_mul_ps(weights[2], cc), _mm512_mul_ps(weights[3], d));
+            _mm512_mul_ps(_mm512_add_ps(near, far), scale)
+        });
         store_triples(out, rgb);
     }
     true
+}
+
+/// The channels of two neighbouring texels of one row at 16 lanes, `[left,
+/// right]`, each `[r, g, b]`; `at` is each lane's left texel's first float.
+/// Six floats from `at` are three pairs, each pair one 64-bit gather per eight
+/// lanes, split into channels by permutes: `(r0, g0)`, `(b0, r1)`, `(g1, b1)`.
+///
+/// The caller guarantees that for every lane both texels are inside `texels`
+/// (six floats from `at`) and that `at + 6` fits an i32.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+#[inline]
+fn row_pairs(at: __m512i, texels: *const f32) -> [[__m512; 3]; 2] {
+    let (even, odd) = (indices(&EVEN), indices(&ODD));
+    let halves = [
+        _mm512_castsi512_si256(at),
+        _mm512_extracti32x8_epi32::<1>(at),
+    ];
+    let pair = |offset: i32| {
+        let [lower, upper] = halves.map(|at| {
+            // SAFETY: the caller's (both texels inside `texels`).
+            unsafe {
+                _mm512_castsi512_ps(_mm512_i32gather_epi64::<4>(
+                    _mm256_add_epi32(at, _mm256_set1_epi32(offset)),
+                    texels.cast(),
+                ))
+            }
+        });
+        [
+            _mm512_permutex2var_ps(lower, even, upper),
+            _mm512_permutex2var_ps(lower, odd, upper),
+        ]
+    };
+    let ([r0, g0], [b0, r1], [g1, b1]) = (pair(0), pair(2), pair(4));
+    [[r0, g0, b0], [r1, g1, b1]]
 }
 
 /// The rotation into the light's frame, if any, and the lat-long map's angles.
