@@ -6,8 +6,11 @@
 //! is how the data moves. The compiler's version of those loops deinterleaves the
 //! directions lane by lane, extracts each lane's cell index for a prefetch and
 //! reads the tables with scalar loads; here 16 directions are three loads and six
-//! permutes, and every table and texel read is one gather for 16 lanes, whose
-//! cache misses the CPU overlaps by itself.
+//! permutes, and every table and texel read is a gather, whose cache misses the
+//! CPU overlaps by itself. Values that sit side by side in memory (a cell's two
+//! CDF entries, a patch row's two node values, a row's two texels) are read as
+//! 64-bit pairs, eight lanes per gather: a gather costs about one load per
+//! element, so a pair read once is half the loads of two 32-bit gathers.
 //!
 //! Each kernel returns `false` without touching `out` where it does not apply
 //! (another sampler, density, mapping or lookup, or tables too large for 32-bit
