@@ -48,6 +48,7 @@ EQUIRECT_JACOBIAN = 19.7392088021787172
 EQUAL_AREA_JACOBIAN = 12.5663706143591730
 ONE_MINUS_EPSILON = float.fromhex("0x1.fffffep-1")
 INV_CDF_ONE = 2.0**-32
+F32_MAX = float.fromhex("0x1.fffffep+127")  # radiance is clamped to it, as on the CPU
 TAN_PI_8 = 0.41421356237309503
 INV_PI = 0.31830988618379067
 SETTLE_STEPS = 6
@@ -501,7 +502,7 @@ class TableLight:
         if p["lookup"] == LOOKUP_NEAREST:
             uu = self._periodic(u) if periodic_u else u
             t = self._texel(self._floor_index(uu * float(w), w), self._floor_index(v * float(h), h))
-            return tuple(c * self.scale for c in t)
+            return tuple(dr.minimum(c * self.scale, F32_MAX) for c in t)
         if p["lookup"] == LOOKUP_NODE:
             # Texel centres at (i + ½)/w along u (periodic), rows as nodes from pole
             # to pole (row j at v = j/(h − 1)).
@@ -524,8 +525,14 @@ class TableLight:
         b = self._texel(x1, y0)
         c = self._texel(x0, y1)
         d = self._texel(x1, y1)
+        # Clamped to the largest finite f32 after the blend and after the scale,
+        # as the CPU's lookups are.
         return tuple(
-            (((gs * gt) * a[ch] + (fs * gt) * b[ch]) + ((gs * ft) * c[ch] + (fs * ft) * d[ch])) * self.scale
+            dr.minimum(
+                dr.minimum(((gs * gt) * a[ch] + (fs * gt) * b[ch]) + ((gs * ft) * c[ch] + (fs * ft) * d[ch]), F32_MAX)
+                * self.scale,
+                F32_MAX,
+            )
             for ch in range(3)
         )
 

@@ -45,8 +45,8 @@ pub struct LightArgs {
     /// The shape of the sampling density over the map [default: piecewise-bilinear
     /// with --sampler inversion and no --table-size, else piecewise-constant].
     /// piecewise-bilinear follows the bilinear lookup (efficiency 1.000 on every
-    /// shared map) for about 14 bytes per texel and a batch sample and pdf up to
-    /// 1.5x the constant one's; piecewise-constant is the smallest (6 bytes per
+    /// shared map) for about 14 bytes per texel and a batch sample and pdf about
+    /// 1.4-1.6x the constant one's; piecewise-constant is the smallest (6 bytes per
     /// texel) and cheapest, and the only one the alias and hierarchical samplers
     /// and --table-size take.
     #[arg(long, value_name = "NAME", value_enum)]

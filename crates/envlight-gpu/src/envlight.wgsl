@@ -98,6 +98,8 @@ const ONE_MINUS_EPSILON: f32 = 0x1.fffffep-1;
 // 2⁻³²: CDF widths are probabilities on the 2³² − 1 scale; the difference from
 // 2³² is 2⁻³² relative, far below f32's resolution.
 const INV_CDF_ONE: f32 = 0x1p-32;
+// The largest finite f32: radiance is clamped to it, as the CPU's lookups are.
+const F32_MAX: f32 = 0x1.fffffep+127;
 
 const SAMPLER_ALIAS: u32 = 1u;
 const DENSITY_BILINEAR: u32 = 1u;
@@ -806,7 +808,7 @@ fn lookup(uv: vec2<f32>) -> vec3<f32> {
         if periodic_u {
             u = periodic(u);
         }
-        return texel(floor_index(u * f32(w), w), floor_index(uv.y * f32(h), h)) * params.scale;
+        return min(texel(floor_index(u * f32(w), w), floor_index(uv.y * f32(h), h)) * params.scale, vec3<f32>(F32_MAX));
     }
     var px: Pair;
     if periodic_u {
@@ -838,8 +840,8 @@ fn lookup(uv: vec2<f32>) -> vec3<f32> {
     let b = texel(px.second, py.first);
     let c = texel(px.first, py.second);
     let d = texel(px.second, py.second);
-    let l = ((gs * gt) * a + (fs * gt) * b) + ((gs * ft) * c + (fs * ft) * d);
-    return l * params.scale;
+    let l = min(((gs * gt) * a + (fs * gt) * b) + ((gs * ft) * c + (fs * ft) * d), vec3<f32>(F32_MAX));
+    return min(l * params.scale, vec3<f32>(F32_MAX));
 }
 
 // ---------------------------------------------------------------------------

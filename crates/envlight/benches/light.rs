@@ -84,28 +84,34 @@ fn bench_build(c: &mut Criterion) {
         group.bench_with_input(BenchmarkId::new("baseline", width), image, |b, img| {
             b.iter_batched(|| img.clone(), BaselineLight::new, BatchSize::PerIteration)
         });
-        group.bench_with_input(BenchmarkId::new("envlight", width), image, |b, img| {
-            b.iter_batched(
-                || img.clone(),
-                |img| EnvironmentLight::new(img, LightOptions::default()).unwrap(),
-                BatchSize::PerIteration,
-            )
-        });
-        group.bench_with_input(
-            BenchmarkId::new("envlight-1thread", width),
-            image,
-            |b, img| {
+        // The baseline's density (piecewise-constant), and the default one.
+        for (name, density) in [
+            ("envlight", Density::PiecewiseConstant),
+            ("envlight-bilinear", Density::PiecewiseBilinear),
+        ] {
+            let options = LightOptions {
+                density,
+                ..Default::default()
+            };
+            group.bench_with_input(BenchmarkId::new(name, width), image, |b, img| {
                 b.iter_batched(
                     || img.clone(),
-                    |img| {
-                        one_thread.install(|| {
-                            EnvironmentLight::new(img, LightOptions::default()).unwrap()
-                        })
-                    },
+                    |img| EnvironmentLight::new(img, options).unwrap(),
                     BatchSize::PerIteration,
                 )
-            },
-        );
+            });
+            group.bench_with_input(
+                BenchmarkId::new(format!("{name}-1thread"), width),
+                image,
+                |b, img| {
+                    b.iter_batched(
+                        || img.clone(),
+                        |img| one_thread.install(|| EnvironmentLight::new(img, options).unwrap()),
+                        BatchSize::PerIteration,
+                    )
+                },
+            );
+        }
     }
     group.finish();
 }

@@ -42,6 +42,7 @@ use crate::distribution::{
     ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
+use crate::light::VectorWidth;
 use crate::math::prefetch_ptr;
 
 /// The largest `f64` below 1.
@@ -150,23 +151,20 @@ impl BilinearDistribution2D {
         // Masses relative to the mean patch area, so that they stay well inside
         // f32's range for any node spacing; a positive mass never rounds to 0.
         let patch_count = ((mu - 1) * (mv - 1)) as f64;
-        let mass = |i: usize, k: usize| -> f64 {
-            let [a, b, c, d] = corners(&values, mu, i, k);
-            let area = (u_nodes[i + 1] - u_nodes[i]) * (v_nodes[k + 1] - v_nodes[k]);
-            area * 0.25 * (a + b + c + d)
-        };
+        let width = VectorWidth::detect();
         let (patches, row_sums) = Distribution2D::from_rows_with(
             mu - 1,
             mv - 1,
             || (),
             |_, k, row| {
-                let mut sum = 0.0f64;
-                for (i, m) in row.iter_mut().enumerate() {
-                    let exact = mass(i, k);
-                    sum += exact;
-                    *m = positive_weight(exact * patch_count);
-                }
-                sum
+                let args = MassRow {
+                    top: &values[k * mu..(k + 1) * mu],
+                    bottom: &values[(k + 1) * mu..(k + 2) * mu],
+                    u_nodes,
+                    height: v_nodes[k + 1] - v_nodes[k],
+                    patch_count,
+                };
+                mass_row_at(width, &args, row)
             },
         );
         let integral: f64 = row_sums.iter().sum();
@@ -682,30 +680,160 @@ fn patch_factors(
     patches: &Distribution2D,
     c: f64,
 ) -> Vec<f32> {
+    use rayon::prelude::*;
     let (mu, mv) = (u_nodes.len(), v_nodes.len());
     let widths: Vec<f64> = u_nodes.windows(2).map(|w| w[1] - w[0]).collect();
     let mut factors = vec![0.0f32; (mu - 1) * (mv - 1)];
-    for (k, row) in factors.chunks_mut(mu - 1).enumerate() {
-        let (cdf, marginal) = patches.row_widths(k);
-        let height = v_nodes[k + 1] - v_nodes[k];
-        let row_scale = c * height * height;
-        let (top, bottom) = (
-            &values[k * mu..(k + 1) * mu],
-            &values[(k + 1) * mu..(k + 2) * mu],
-        );
-        for (i, f) in row.iter_mut().enumerate() {
-            let sum = top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64;
-            let probability = probability_of_widths([cdf[i + 1] - cdf[i], marginal]);
-            let denominator = row_scale * widths[i] * widths[i] * sum;
-            let factor = (4.0 * probability / denominator).min(f32::MAX as f64) as f32;
-            *f = if denominator > 0.0 && probability > 0.0 {
-                factor
-            } else {
-                0.0
-            };
+    let width = VectorWidth::detect();
+    // Rows in parallel, each an independent loop; a task takes enough rows to
+    // be worth its scheduling.
+    let rows_per_task = (16384 / mu).max(1);
+    factors
+        .par_chunks_mut((mu - 1) * rows_per_task)
+        .enumerate()
+        .for_each(|(task, rows)| {
+            for (r, row) in rows.chunks_mut(mu - 1).enumerate() {
+                let k = task * rows_per_task + r;
+                let (cdf, marginal) = patches.row_widths(k);
+                let height = v_nodes[k + 1] - v_nodes[k];
+                let args = FactorRow {
+                    top: &values[k * mu..(k + 1) * mu],
+                    bottom: &values[(k + 1) * mu..(k + 2) * mu],
+                    cdf,
+                    marginal,
+                    widths: &widths,
+                    row_scale: c * height * height,
+                };
+                factor_row_at(width, &args, row);
+            }
+        });
+    factors
+}
+
+/// One row of patches' inputs to their masses: the top and bottom node values,
+/// the u nodes, the row's height and the number of patches.
+struct MassRow<'a> {
+    top: &'a [f32],
+    bottom: &'a [f32],
+    u_nodes: &'a [f64],
+    height: f64,
+    patch_count: f64,
+}
+
+/// [`mass_row`] compiled for the vectors `width` names (the same IEEE
+/// operations at every width, so the same weights and sum).
+fn mass_row_at(width: VectorWidth, args: &MassRow<'_>, out: &mut [f32]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2(args: &MassRow<'_>, out: &mut [f32]) -> f64 {
+            mass_row(args, out)
+        }
+        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+        fn avx512(args: &MassRow<'_>, out: &mut [f32]) -> f64 {
+            mass_row(args, out)
+        }
+        match width {
+            // SAFETY: `VectorWidth::detect` names only widths this CPU has.
+            VectorWidth::Avx512 => return unsafe { avx512(args, out) },
+            VectorWidth::Avx2 => return unsafe { avx2(args, out) },
+            VectorWidth::Baseline => {}
         }
     }
-    factors
+    let _ = width;
+    mass_row(args, out)
+}
+
+/// A row of patches' masses `Δu Δv (a + b + c + d) / 4` (exact, in f64): each
+/// written to `out` relative to the mean patch area, so that it stays well
+/// inside f32's range for any node spacing (a positive mass never rounds to 0),
+/// and their sum returned, summed in four interleaved partial sums (a loop the
+/// compiler vectorizes; one running sum would be a chain of dependent adds).
+#[inline(always)]
+fn mass_row(a: &MassRow<'_>, out: &mut [f32]) -> f64 {
+    let n = out.len();
+    let (top, bottom, u) = (&a.top[..n + 1], &a.bottom[..n + 1], &a.u_nodes[..n + 1]);
+    let mass = |i: usize| {
+        let area = (u[i + 1] - u[i]) * a.height;
+        area * 0.25 * (top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64)
+    };
+    let mut partial = [0.0f64; 4];
+    let mut quads = out.chunks_exact_mut(4);
+    for (q, quad) in (&mut quads).enumerate() {
+        for (l, (o, p)) in quad.iter_mut().zip(&mut partial).enumerate() {
+            let exact = mass(4 * q + l);
+            *p += exact;
+            *o = positive_weight(exact * a.patch_count);
+        }
+    }
+    let rest = quads.into_remainder();
+    let mut rest_sum = 0.0f64;
+    for (l, o) in rest.iter_mut().enumerate() {
+        let exact = mass(n - n % 4 + l);
+        rest_sum += exact;
+        *o = positive_weight(exact * a.patch_count);
+    }
+    (partial[0] + partial[1]) + (partial[2] + partial[3]) + rest_sum
+}
+
+/// One row of [`patch_factors`]' inputs: the patches' top and bottom node
+/// values, the row's conditional CDF and marginal width, the patch widths and
+/// `c Δv²`.
+struct FactorRow<'a> {
+    top: &'a [f32],
+    bottom: &'a [f32],
+    cdf: &'a [u32],
+    marginal: u32,
+    widths: &'a [f64],
+    row_scale: f64,
+}
+
+/// [`factor_row`] compiled for the vectors `width` names (the same IEEE
+/// operations at every width, so the same factors; AVX-512 divides eight f64 at
+/// a time where the baseline's SSE2 divides two).
+fn factor_row_at(width: VectorWidth, args: &FactorRow<'_>, out: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2(args: &FactorRow<'_>, out: &mut [f32]) {
+            factor_row(args, out)
+        }
+        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
+        fn avx512(args: &FactorRow<'_>, out: &mut [f32]) {
+            factor_row(args, out)
+        }
+        match width {
+            // SAFETY: `VectorWidth::detect` names only widths this CPU has.
+            VectorWidth::Avx512 => return unsafe { avx512(args, out) },
+            VectorWidth::Avx2 => return unsafe { avx2(args, out) },
+            VectorWidth::Baseline => {}
+        }
+    }
+    let _ = width;
+    factor_row(args, out)
+}
+
+/// The factors of one row of patches (see [`patch_factors`]).
+#[inline(always)]
+fn factor_row(a: &FactorRow<'_>, out: &mut [f32]) {
+    let n = out.len();
+    let (top, bottom, cdf, widths) = (
+        &a.top[..n + 1],
+        &a.bottom[..n + 1],
+        &a.cdf[..n + 1],
+        &a.widths[..n],
+    );
+    for (i, f) in out.iter_mut().enumerate() {
+        let sum = top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64;
+        let probability = probability_of_widths([cdf[i + 1] - cdf[i], a.marginal]);
+        let denominator = a.row_scale * widths[i] * widths[i] * sum;
+        let factor = (4.0 * probability / denominator).min(f32::MAX as f64) as f32;
+        *f = if denominator > 0.0 && probability > 0.0 {
+            factor
+        } else {
+            0.0
+        };
+    }
 }
 
 /// The power of two [`pdf_from_weights`] scales the weighted corners by: 1 for an
@@ -1083,6 +1211,76 @@ mod tests {
 
     /// Significance level of every chi-square test here.
     const ALPHA: f64 = 1e-3;
+
+    /// The patch factors and masses are the same bits at every vector width this
+    /// CPU has (the tables must not depend on the machine that built them): a row
+    /// with a sun, zero nodes, a zero-width patch and values spanning f32's range.
+    #[test]
+    fn patch_tables_are_the_same_at_every_vector_width() {
+        let mut rng = SplitMix64::new(11);
+        let n = 203;
+        let top: Vec<f32> = (0..=n)
+            .map(|i| match i % 17 {
+                0 => 0.0,
+                1 => 3e30,
+                2 => 1e-30,
+                _ => rng.next_f32() * 5.0,
+            })
+            .collect();
+        let bottom: Vec<f32> = (0..=n).map(|_| rng.next_f32()).collect();
+        let mut cdf = vec![0u32; n + 1];
+        for i in 1..=n {
+            cdf[i] = cdf[i - 1] + (rng.next_f32() * 1e6) as u32 * u32::from(i % 13 != 0);
+        }
+        let mut widths: Vec<f64> = (0..n).map(|_| 0.5 + rng.next_f32() as f64).collect();
+        widths[7] = 0.0;
+        let args = FactorRow {
+            top: &top,
+            bottom: &bottom,
+            cdf: &cdf,
+            marginal: 123_456_789,
+            widths: &widths,
+            row_scale: 0.37,
+        };
+        let run = |width| {
+            let mut out = vec![0.0f32; n];
+            factor_row_at(width, &args, &mut out);
+            out.iter().map(|f| f.to_bits()).collect::<Vec<_>>()
+        };
+        let baseline = run(VectorWidth::Baseline);
+        assert!(baseline.iter().any(|&b| b != 0) && baseline.contains(&0));
+        // The patches' masses and their row sum, over the same nodes (a row
+        // length that leaves a remainder after the fours).
+        let u_nodes: Vec<f64> = std::iter::once(0.0)
+            .chain(widths.iter().scan(0.0, |x, w| {
+                *x += w;
+                Some(*x)
+            }))
+            .collect();
+        let masses = MassRow {
+            top: &top,
+            bottom: &bottom,
+            u_nodes: &u_nodes,
+            height: 0.013,
+            patch_count: 5e4,
+        };
+        let run_masses = |width| {
+            let mut out = vec![0.0f32; n];
+            let sum = mass_row_at(width, &masses, &mut out);
+            (
+                sum.to_bits(),
+                out.iter().map(|f| f.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        let baseline_masses = run_masses(VectorWidth::Baseline);
+        assert!(f64::from_bits(baseline_masses.0) > 0.0 && baseline_masses.1.contains(&0));
+        for width in [VectorWidth::Avx2, VectorWidth::Avx512] {
+            if width <= VectorWidth::detect() {
+                assert_eq!(run(width), baseline, "{width:?}");
+                assert_eq!(run_masses(width), baseline_masses, "{width:?}");
+            }
+        }
+    }
 
     fn close(a: f32, b: f32, tol: f32) -> bool {
         (a - b).abs() <= tol * (1.0 + b.abs())

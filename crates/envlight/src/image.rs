@@ -450,7 +450,11 @@ fn blend([a, b, c, d]: [[f32; 3]; 4], fs: f32, ft: f32) -> [f32; 3] {
     let weights = [gs * gt, fs * gt, gs * ft, fs * ft];
     let mut out = [0.0f32; 3];
     for k in 0..3 {
-        out[k] = (weights[0] * a[k] + weights[1] * b[k]) + (weights[2] * c[k] + weights[3] * d[k]);
+        // Kept finite: weights that round to a sum just above 1 would carry
+        // texels within an ulp or two of f32::MAX past it.
+        out[k] = ((weights[0] * a[k] + weights[1] * b[k])
+            + (weights[2] * c[k] + weights[3] * d[k]))
+            .min(f32::MAX);
     }
     out
 }

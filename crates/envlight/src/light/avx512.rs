@@ -395,6 +395,7 @@ pub(super) fn radiance_chunk(
     let rows = _mm512_set1_ps(len_f32(h.saturating_sub(1)));
     let last_row = _mm512_set1_epi32((h32 - 2).max(0));
     let scale = _mm512_set1_ps(light.options.scale);
+    let largest = _mm512_set1_ps(f32::MAX);
     let texels = image.texels().as_ptr().cast::<f32>();
     for (dirs, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
         let [x, y, z] = load_directions(dirs);
@@ -472,7 +473,9 @@ pub(super) fn radiance_chunk(
             let [a, b, cc, d] = corners.map(|corner| corner[c]);
             let near = _mm512_add_ps(_mm512_mul_ps(weights[0], a), _mm512_mul_ps(weights[1], b));
             let far = _mm512_add_ps(_mm512_mul_ps(weights[2], cc), _mm512_mul_ps(weights[3], d));
-            _mm512_mul_ps(_mm512_add_ps(near, far), scale)
+            // `blend`'s and `scaled`'s clamps to f32::MAX.
+            let blended = _mm512_min_ps(_mm512_add_ps(near, far), largest);
+            _mm512_min_ps(_mm512_mul_ps(blended, scale), largest)
         });
         store_triples(out, rgb);
     }

@@ -152,7 +152,7 @@ impl EnvironmentLight {
                         LightSample {
                             direction,
                             pdf,
-                            radiance: [l[0] * scale, l[1] * scale, l[2] * scale],
+                            radiance: super::scaled(l, scale),
                             uv: p.uv,
                         }
                     })
@@ -270,7 +270,7 @@ impl EnvironmentLight {
                 directions[at] = Vec3::new(x[j], y[j], z[j]);
                 jacobians[at] = jacobian[j];
                 let l = self.image.fetch(&lookups, j);
-                radiance[at] = [l[0] * scale, l[1] * scale, l[2] * scale];
+                radiance[at] = super::scaled(l, scale);
             }
         }
         let mut pdfs = [0.0f32; STAGED_BLOCK];
@@ -638,7 +638,7 @@ impl EnvironmentLight {
                 let s = self.options.scale;
                 for (i, o) in out.iter_mut().enumerate() {
                     let l = self.image.fetch(lookups, i);
-                    *o = [l[0] * s, l[1] * s, l[2] * s];
+                    *o = super::scaled(l, s);
                 }
             },
         )
@@ -735,7 +735,7 @@ struct CellBlock {
 /// The results are the same at every width: the kernels use no fused
 /// multiply-add, only operations that round alike at any vector width.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub(super) enum VectorWidth {
+pub(crate) enum VectorWidth {
     Baseline,
     Avx2,
     Avx512,
@@ -747,7 +747,7 @@ impl VectorWidth {
     /// benchmarks and for checking a result on another path). Decided once per
     /// process.
     #[inline]
-    pub(super) fn detect() -> Self {
+    pub(crate) fn detect() -> Self {
         static WIDTH: std::sync::OnceLock<VectorWidth> = std::sync::OnceLock::new();
         *WIDTH.get_or_init(|| {
             let widest = Self::widest();
@@ -1028,6 +1028,93 @@ mod tests {
                 }
                 for (k, &x) in xi.iter().enumerate() {
                     assert_eq!(samples[k], light.sample(x), "{case} {x:?}");
+                }
+            }
+        }
+    }
+
+    /// Texels at f32::MAX (which a bilinear blend's weights, summing to just
+    /// above 1, once carried to infinity: a fuzzer's find) and scales that
+    /// overflow: radiance stays finite on every path and width (the largest
+    /// finite f32 where it would overflow, 0 for scale 0), bit for bit the
+    /// single queries'.
+    #[test]
+    fn radiance_of_the_brightest_texels_stays_finite_at_every_width() {
+        let image = crate::EnvImage::from_fn(8, 4, |_, _| [f32::MAX; 3]).unwrap();
+        let dirs: Vec<Vec3> = (0..997u64)
+            .map(|k| crate::math::uniform_sphere(crate::rng::xi_2d(9, k)))
+            .collect();
+        let xi: Vec<[f32; 2]> = (0..997u64).map(|k| crate::rng::xi_2d(10, k)).collect();
+        for (density, lookup, scale) in [
+            (Density::PiecewiseBilinear, Lookup::Bilinear, 1.0),
+            (Density::PiecewiseBilinear, Lookup::Node, 1.0),
+            (Density::PiecewiseConstant, Lookup::Bilinear, 1.0),
+            (Density::PiecewiseBilinear, Lookup::Bilinear, 3.0),
+            (Density::PiecewiseConstant, Lookup::Nearest, 3.0),
+            (Density::PiecewiseBilinear, Lookup::Bilinear, 0.0),
+        ] {
+            let options = LightOptions {
+                density,
+                lookup,
+                scale,
+                ..Default::default()
+            };
+            let light = EnvironmentLight::new(image.clone(), options).unwrap();
+            let case = format!("{density:?} {lookup:?} scale {scale}");
+            let expected = |l: [f32; 3]| {
+                let finite = l.iter().all(|c| c.is_finite() && *c >= 0.0);
+                finite && (scale > 0.0 || l == [0.0; 3])
+            };
+            for width in [
+                VectorWidth::Baseline,
+                VectorWidth::Avx2,
+                VectorWidth::Avx512,
+            ] {
+                if !supports(width) {
+                    continue;
+                }
+                let mut radiance = vec![[0.0; 3]; dirs.len()];
+                let mut samples = vec![None; xi.len()];
+                // SAFETY: only widths this CPU supports.
+                unsafe {
+                    match width {
+                        VectorWidth::Baseline => {
+                            light.radiance_chunk(&dirs, &mut radiance);
+                            light.sample_chunk(&xi, &mut samples);
+                        }
+                        VectorWidth::Avx2 => {
+                            (EnvironmentLight::radiance_chunk_wide().avx2)(
+                                &light,
+                                &dirs,
+                                &mut radiance,
+                            );
+                            (EnvironmentLight::sample_chunk_wide().avx2)(&light, &xi, &mut samples);
+                        }
+                        VectorWidth::Avx512 => {
+                            (EnvironmentLight::radiance_chunk_wide().avx512)(
+                                &light,
+                                &dirs,
+                                &mut radiance,
+                            );
+                            (EnvironmentLight::sample_chunk_wide().avx512)(
+                                &light,
+                                &xi,
+                                &mut samples,
+                            );
+                        }
+                    }
+                }
+                for (k, &d) in dirs.iter().enumerate() {
+                    let single = light.radiance(d);
+                    assert!(expected(single), "{case} {d:?}: {single:?}");
+                    assert_eq!(radiance[k].map(f32::to_bits), single.map(f32::to_bits));
+                }
+                for (k, &x) in xi.iter().enumerate() {
+                    let single = light.sample(x);
+                    if let Some(s) = single {
+                        assert!(expected(s.radiance), "{case} {x:?}: {:?}", s.radiance);
+                    }
+                    assert_eq!(samples[k], single, "{case} {width:?} {x:?}");
                 }
             }
         }

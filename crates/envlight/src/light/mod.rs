@@ -27,6 +27,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 mod batch;
+pub(crate) use batch::VectorWidth;
 mod build;
 pub(crate) use build::bilinear_nodes;
 pub use build::table_reduction;
@@ -439,8 +440,7 @@ impl EnvironmentLight {
             self.options.lookup,
             self.options.mapping.wrap(),
         );
-        let s = self.options.scale;
-        [l[0] * s, l[1] * s, l[2] * s]
+        scaled(l, self.options.scale)
     }
 
     /// Draws a direction for `ξ ∈ [0, 1)²` with density ∝ importance.
@@ -760,6 +760,14 @@ impl EnvironmentLight {
 #[inline(always)]
 pub(crate) fn solid_angle_density(planar_pdf: f32, inv_jacobian: f32) -> f32 {
     solid_angle(planar_pdf, inv_jacobian)
+}
+
+/// A looked-up radiance `l` times the light's `scale`, kept finite: a bright
+/// texel times a large scale would round past f32::MAX. Every path (single
+/// calls, lanes, the AVX-512 kernel) scales through this or its operations.
+#[inline(always)]
+pub(crate) fn scaled(l: [f32; 3], scale: f32) -> [f32; 3] {
+    l.map(|c| (c * scale).min(f32::MAX))
 }
 
 #[cfg(test)]
