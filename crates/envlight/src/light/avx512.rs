@@ -455,28 +455,33 @@ pub(super) fn radiance_chunk(
             [a, b, c, d]
         } else {
             let at = [texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1)];
-            at.map(|at| {
-                [0, 1, 2].map(|c| {
+            let mut corners = [[zero; 3]; 4];
+            for (corner, &at) in corners.iter_mut().zip(&at) {
+                for (c, channel) in corner.iter_mut().enumerate() {
                     // SAFETY: x0, x1 < w and y0, y1 < h, so every corner's
                     // channel is inside the w h texels, and 3 w h fits an i32
                     // (checked above).
-                    unsafe {
+                    *channel = unsafe {
                         _mm512_i32gather_ps::<4>(
-                            _mm512_add_epi32(at, _mm512_set1_epi32(c)),
+                            _mm512_add_epi32(at, _mm512_set1_epi32(c as i32)),
                             texels.cast(),
                         )
-                    }
-                })
-            })
+                    };
+                }
+            }
+            corners
         };
-        let rgb: [__m512; 3] = std::array::from_fn(|c| {
-            let [a, b, cc, d] = corners.map(|corner| corner[c]);
+        // A plain loop: a closure here is compiled without this function's
+        // target features, so it is not inlined (measured 25% slower).
+        let mut rgb = [zero; 3];
+        for (c, rgb) in rgb.iter_mut().enumerate() {
+            let [a, b, cc, d] = [corners[0][c], corners[1][c], corners[2][c], corners[3][c]];
             let near = _mm512_add_ps(_mm512_mul_ps(weights[0], a), _mm512_mul_ps(weights[1], b));
             let far = _mm512_add_ps(_mm512_mul_ps(weights[2], cc), _mm512_mul_ps(weights[3], d));
             // `blend`'s and `scaled`'s clamps to f32::MAX.
             let blended = _mm512_min_ps(_mm512_add_ps(near, far), largest);
-            _mm512_min_ps(_mm512_mul_ps(blended, scale), largest)
-        });
+            *rgb = _mm512_min_ps(_mm512_mul_ps(blended, scale), largest);
+        }
         store_triples(out, rgb);
     }
     true
