@@ -983,41 +983,7 @@ mod tests {
                     "{sampler:?} {density:?} {lookup:?} {width:?} {} {rotation:?}",
                     image.width()
                 );
-                let mut pdfs = vec![0.0; dirs.len()];
-                let mut radiance = vec![[0.0; 3]; dirs.len()];
-                let mut samples = vec![None; xi.len()];
-                // SAFETY: `widths` holds only the widths this CPU supports.
-                unsafe {
-                    match width {
-                        VectorWidth::Baseline => {
-                            light.pdf_chunk(&dirs, &mut pdfs);
-                            light.radiance_chunk(&dirs, &mut radiance);
-                            light.sample_chunk(&xi, &mut samples);
-                        }
-                        VectorWidth::Avx2 => {
-                            (EnvironmentLight::pdf_chunk_wide().avx2)(&light, &dirs, &mut pdfs);
-                            (EnvironmentLight::radiance_chunk_wide().avx2)(
-                                &light,
-                                &dirs,
-                                &mut radiance,
-                            );
-                            (EnvironmentLight::sample_chunk_wide().avx2)(&light, &xi, &mut samples);
-                        }
-                        VectorWidth::Avx512 => {
-                            (EnvironmentLight::pdf_chunk_wide().avx512)(&light, &dirs, &mut pdfs);
-                            (EnvironmentLight::radiance_chunk_wide().avx512)(
-                                &light,
-                                &dirs,
-                                &mut radiance,
-                            );
-                            (EnvironmentLight::sample_chunk_wide().avx512)(
-                                &light,
-                                &xi,
-                                &mut samples,
-                            );
-                        }
-                    }
-                }
+                let (pdfs, radiance, samples) = chunks_at(width, &light, &dirs, &xi);
                 for (k, &d) in dirs.iter().enumerate() {
                     assert_eq!(pdfs[k].to_bits(), light.pdf(d).to_bits(), "{case} {d:?}");
                     assert_eq!(
@@ -1073,37 +1039,7 @@ mod tests {
                 if !supports(width) {
                     continue;
                 }
-                let mut radiance = vec![[0.0; 3]; dirs.len()];
-                let mut samples = vec![None; xi.len()];
-                // SAFETY: only widths this CPU supports.
-                unsafe {
-                    match width {
-                        VectorWidth::Baseline => {
-                            light.radiance_chunk(&dirs, &mut radiance);
-                            light.sample_chunk(&xi, &mut samples);
-                        }
-                        VectorWidth::Avx2 => {
-                            (EnvironmentLight::radiance_chunk_wide().avx2)(
-                                &light,
-                                &dirs,
-                                &mut radiance,
-                            );
-                            (EnvironmentLight::sample_chunk_wide().avx2)(&light, &xi, &mut samples);
-                        }
-                        VectorWidth::Avx512 => {
-                            (EnvironmentLight::radiance_chunk_wide().avx512)(
-                                &light,
-                                &dirs,
-                                &mut radiance,
-                            );
-                            (EnvironmentLight::sample_chunk_wide().avx512)(
-                                &light,
-                                &xi,
-                                &mut samples,
-                            );
-                        }
-                    }
-                }
+                let (_, radiance, samples) = chunks_at(width, &light, &dirs, &xi);
                 for (k, &d) in dirs.iter().enumerate() {
                     let single = light.radiance(d);
                     assert!(expected(single), "{case} {d:?}: {single:?}");
@@ -1118,6 +1054,48 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The chunk kernels' pdfs and radiance at `dirs` and samples at `xi`, as
+    /// compiled for `width`.
+    ///
+    /// # Panics
+    /// When this CPU does not run `width`'s kernels.
+    fn chunks_at(
+        width: VectorWidth,
+        light: &EnvironmentLight,
+        dirs: &[Vec3],
+        xi: &[[f32; 2]],
+    ) -> (Vec<f32>, Vec<[f32; 3]>, Vec<Option<LightSample>>) {
+        assert!(supports(width), "{width:?} kernels on this CPU");
+        let mut pdfs = vec![0.0; dirs.len()];
+        let mut radiance = vec![[0.0; 3]; dirs.len()];
+        let mut samples = vec![None; xi.len()];
+        let (pdf, rad, sample) = match width {
+            VectorWidth::Baseline => {
+                light.pdf_chunk(dirs, &mut pdfs);
+                light.radiance_chunk(dirs, &mut radiance);
+                light.sample_chunk(xi, &mut samples);
+                return (pdfs, radiance, samples);
+            }
+            VectorWidth::Avx2 => (
+                EnvironmentLight::pdf_chunk_wide().avx2,
+                EnvironmentLight::radiance_chunk_wide().avx2,
+                EnvironmentLight::sample_chunk_wide().avx2,
+            ),
+            VectorWidth::Avx512 => (
+                EnvironmentLight::pdf_chunk_wide().avx512,
+                EnvironmentLight::radiance_chunk_wide().avx512,
+                EnvironmentLight::sample_chunk_wide().avx512,
+            ),
+        };
+        // SAFETY: this CPU runs `width`'s kernels (asserted above).
+        unsafe {
+            pdf(light, dirs, &mut pdfs);
+            rad(light, dirs, &mut radiance);
+            sample(light, xi, &mut samples);
+        }
+        (pdfs, radiance, samples)
     }
 
     /// Whether this CPU runs kernels compiled for `width`.
