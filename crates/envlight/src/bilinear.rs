@@ -767,10 +767,7 @@ fn mass_row_at(width: VectorWidth, args: &MassRow<'_>, out: &mut [f32]) -> f64 {
 fn mass_row(a: &MassRow<'_>, out: &mut [f32]) -> f64 {
     let n = out.len();
     let (top, bottom, u) = (&a.top[..n + 1], &a.bottom[..n + 1], &a.u_nodes[..n + 1]);
-    let mass = |i: usize| {
-        let area = (u[i + 1] - u[i]) * a.height;
-        area * 0.25 * (top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64)
-    };
+    let mass = |i: usize| (u[i + 1] - u[i]) * a.height * 0.25 * corner_sum(top, bottom, i);
     let mut partial = [0.0f64; 4];
     let mut quads = out.chunks_exact_mut(4);
     for (q, quad) in (&mut quads).enumerate() {
@@ -809,6 +806,13 @@ fn factor_row_at(width: VectorWidth, args: &FactorRow<'_>, out: &mut [f32]) {
     at_width!(width, factor_row(args, out): &FactorRow<'_> => ())
 }
 
+/// The sum of patch `i`'s four node values in f64, in [`corners`]' order, from
+/// its row's top and bottom nodes.
+#[inline(always)]
+fn corner_sum(top: &[f32], bottom: &[f32], i: usize) -> f64 {
+    top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64
+}
+
 /// The factors of one row of patches (see [`patch_factors`]).
 #[inline(always)]
 fn factor_row(a: &FactorRow<'_>, out: &mut [f32]) {
@@ -820,7 +824,7 @@ fn factor_row(a: &FactorRow<'_>, out: &mut [f32]) {
         &a.widths[..n],
     );
     for (i, f) in out.iter_mut().enumerate() {
-        let sum = top[i] as f64 + top[i + 1] as f64 + bottom[i] as f64 + bottom[i + 1] as f64;
+        let sum = corner_sum(top, bottom, i);
         let probability = probability_of_widths([cdf[i + 1] - cdf[i], a.marginal]);
         let denominator = a.row_scale * widths[i] * widths[i] * sum;
         let factor = (4.0 * probability / denominator).min(f32::MAX as f64) as f32;

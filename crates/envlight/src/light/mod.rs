@@ -766,7 +766,7 @@ pub(crate) fn solid_angle_density(planar_pdf: f32, inv_jacobian: f32) -> f32 {
 /// texel times a large scale would round past f32::MAX. Every path (single
 /// calls, lanes, the AVX-512 kernel) scales through this or its operations.
 #[inline(always)]
-pub(crate) fn scaled(l: [f32; 3], scale: f32) -> [f32; 3] {
+fn scaled(l: [f32; 3], scale: f32) -> [f32; 3] {
     l.map(|c| (c * scale).min(f32::MAX))
 }
 
