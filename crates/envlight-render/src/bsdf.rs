@@ -171,6 +171,14 @@ impl Bsdf {
         matches!(self, Bsdf::Conductor { .. })
     }
 
+    /// A GGX metal's roughness `α` (as clamped for sampling), `None` for others.
+    pub fn conductor_roughness(&self) -> Option<f32> {
+        match *self {
+            Bsdf::Conductor { alpha, .. } => Some(alpha.clamp(MIN_ALPHA, 1.0)),
+            _ => None,
+        }
+    }
+
     /// The factor `f` of the product sampler's target `L(ω) f(ω)` at a surface point
     /// with (world) normal `normal`, facing the viewer, and outgoing direction
     /// `wo_world` (DESIGN.md §6a). Only a sampling target: a light sample drawn with

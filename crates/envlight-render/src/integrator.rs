@@ -9,6 +9,7 @@ use crate::strategy::{CompensatedLight, Strategy};
 use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use envlight::portal::{Portal, PortalLight, PortalOptions, PortalPoint};
 use envlight::rng::SplitMix64;
+use envlight::light::Density;
 use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
 use std::sync::Arc;
 
@@ -20,6 +21,16 @@ use std::sync::Arc;
 /// through the metals, which sampling at a diffuse vertex does not touch, carries
 /// the error and the second sample only costs time.
 const DIFFUSE_PRODUCT_SAMPLES: u32 = 1;
+
+/// Metals narrower than this (GGX α) take product samples under
+/// [`Strategy::MisProduct`] when the light's density is piecewise-bilinear (the
+/// default); rougher ones, and every metal under a piecewise-constant density,
+/// the compensated light (see [`Integrator::li_with`]). Measured on `balls`
+/// (BENCHMARKS.md, "Product samples at the near-mirror"): with the bilinear
+/// density the near-mirror (α 0.02) gains at equal time in every seed and the
+/// copper (α 0.25) measured the same either way; with the constant density the
+/// near-mirror gains per sample but lost at equal time in two seeds of three.
+pub const PRODUCT_METAL_BELOW_ROUGHNESS: f32 = 0.1;
 
 /// Cells along each side of the portal light's rectified tables: small enough that
 /// a portal's table (`12 n²` bytes) stays in cache along the paths, which sampling
@@ -45,6 +56,9 @@ pub struct Integrator<'a> {
     /// The portal light over the scene's openings, for the portal strategies in a
     /// scene that has portals.
     portal: Option<PortalLight>,
+    /// Metals narrower than this take product samples under `mis-product`
+    /// ([`PRODUCT_METAL_BELOW_ROUGHNESS`], or 0 under a piecewise-constant density).
+    product_metals_below: f32,
 }
 
 /// The working state of one thread's paths for [`Integrator::li_with`]: for the
@@ -125,6 +139,10 @@ impl<'a> Integrator<'a> {
             PortalLight::new(Arc::new(light.clone()), &quads, options)
                 .expect("the scene has at most 8 portals")
         });
+        let product_metals_below = match light.options().density {
+            Density::PiecewiseBilinear => PRODUCT_METAL_BELOW_ROUGHNESS,
+            Density::PiecewiseConstant => 0.0,
+        };
         Self {
             scene,
             light,
@@ -133,6 +151,7 @@ impl<'a> Integrator<'a> {
             compensated,
             product,
             portal,
+            product_metals_below,
         }
     }
 
@@ -270,17 +289,22 @@ impl<'a> Integrator<'a> {
             }
             // The product sampler's target at this vertex; the escaped BSDF ray below
             // is weighted with the pdf of this same shading point.
-            // `mis-product` samples metals from the MIS-compensated light (with BSDF
-            // sampling, power heuristic), not from their product: BSDF sampling
-            // covers a narrow lobe already, the compensated light covers what it
-            // misses, at a light sample's cost. Product samples at metals won at
-            // equal samples but cost 30% more per sample and lost at equal time
-            // (BENCHMARKS.md, "Metals in mis-product").
-            // (With the on-the-fly product, measured against the tables, metals take
-            // product samples: its glossy weights carry the cosine.)
+            // `mis-product` takes product samples at a near-mirror metal (α below
+            // `product_metals_below`) and samples other metals from the
+            // MIS-compensated light, both with BSDF sampling (power heuristic). At
+            // the near-mirror the sun's highlight is most of a render's error; the
+            // product (light × lobe, the light's own bilinear density within each
+            // patch, which matches the bilinear radiance exactly) cut `balls`' RMSE
+            // to 0.56–0.68× `mis` at equal time against 0.63–1.00× with the
+            // compensated light. At the rough copper the two measured the same,
+            // and the compensated light costs a light sample
+            // (PRODUCT_METAL_BELOW_ROUGHNESS).
             let on_the_fly = self.product.as_ref().is_some_and(|p| p.is_on_the_fly());
-            let light_here =
-                self.strategy == Strategy::MisProduct && bsdf.is_conductor() && !on_the_fly;
+            let light_here = self.strategy == Strategy::MisProduct
+                && !on_the_fly
+                && bsdf
+                    .conductor_roughness()
+                    .is_some_and(|a| a >= self.product_metals_below);
             if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
                 point.set_factor(&bsdf.product_factor(normal, -ray.direction));
             }

@@ -17,7 +17,7 @@ use std::str::FromStr;
 /// | `mis` | importance sampling, power heuristic | power heuristic |
 /// | `mis-compensated` | compensated distribution, power heuristic | power heuristic |
 /// | `product` | product sampling of `L ×` the BSDF's factor, weight 1 | weight 0 |
-/// | `mis-product` | product sampling (diffuse: alone; plastic: power heuristic); metals: the compensated distribution, power heuristic | as the shadow ray |
+/// | `mis-product` | product sampling (diffuse: alone; plastic, and metals of GGX α < 0.1 under the bilinear density: power heuristic); other metals: the compensated distribution, power heuristic | as the shadow ray |
 /// | `portal` | the portal light at the vertex, weight 1 | weight 0 |
 /// | `mis-portal` | the portal light at the vertex, balance heuristic | balance heuristic |
 ///
