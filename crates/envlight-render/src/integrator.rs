@@ -7,9 +7,9 @@ use crate::rgb::{add, is_black, max_component, mul, scale, Rgb};
 use crate::scene::Scene;
 use crate::strategy::{CompensatedLight, Strategy};
 use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
+use envlight::light::Density;
 use envlight::portal::{Portal, PortalLight, PortalOptions, PortalPoint};
 use envlight::rng::SplitMix64;
-use envlight::light::Density;
 use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
 use std::sync::Arc;
 
