@@ -171,10 +171,10 @@ impl Bsdf {
         matches!(self, Bsdf::Conductor { .. })
     }
 
-    /// A GGX metal's roughness `α` (as clamped for sampling), `None` for others.
+    /// A GGX metal's roughness `α` as its product factor takes it, `None` for others.
     pub fn conductor_roughness(&self) -> Option<f32> {
         match *self {
-            Bsdf::Conductor { alpha, .. } => Some(alpha.clamp(MIN_ALPHA, 1.0)),
+            Bsdf::Conductor { alpha, .. } => Some(factor_roughness(alpha)),
             _ => None,
         }
     }
@@ -201,10 +201,17 @@ impl Bsdf {
         match *self {
             Bsdf::Diffuse { .. } | Bsdf::Plastic { .. } => Factor::cosine(normal),
             Bsdf::Conductor { alpha, .. } => {
-                Factor::glossy(normal, wo_world, alpha.clamp(MIN_ALPHA, 1.0))
+                Factor::glossy(normal, wo_world, factor_roughness(alpha))
             }
         }
     }
+}
+
+/// A roughness clamped into `[MIN_ALPHA, 1]`, the product factor's lobe proxy's
+/// domain.
+#[inline]
+fn factor_roughness(alpha: f32) -> f32 {
+    alpha.clamp(MIN_ALPHA, 1.0)
 }
 
 /// Probability of sampling the coating of [`Bsdf::Plastic`]: its Fresnel

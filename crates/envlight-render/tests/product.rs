@@ -56,7 +56,7 @@ fn mis_product_agrees_with_mis_on_balls() {
         .iter()
         .map(|t| t.map(|c| c.min(CLAMP)))
         .collect();
-    let sky = envlight::EnvImage::new(128, 64, clamped).unwrap();
+    let sky = envlight::EnvImage::new(sky.width(), sky.height(), clamped).unwrap();
     agree_with_mis("balls", sky, &[(Strategy::MisProduct, 24)]);
 }
 
