@@ -25,7 +25,7 @@ use exr::meta::BlockDescription;
 
 /// Bytes of blocks decompressed at once by the OpenEXR loader (at least one
 /// block): bounds the memory in flight whatever the thread count.
-pub(super) const IN_FLIGHT_BYTES: usize = 32 << 20;
+pub(super) const IN_FLIGHT_BYTES: usize = 16 << 20;
 
 /// Bytes any encoding may produce beyond its expansion ratio (stream headers,
 /// padding of a partial block): small blocks need no ratio to be believable.
@@ -125,8 +125,8 @@ pub(super) fn check_exr_chunk_table(
     let header = &headers[part];
     let table = start + 8 * headers[..part].iter().map(|h| h.chunk_count).sum::<usize>();
     let tiled = matches!(header.blocks, BlockDescription::Tiles(_));
-    // Part number (multi-part files only), then the tile's four coordinates or the
-    // scanline block's y, then the pixel data's byte count.
+    // Before the pixel data's byte count: the part number (multi-part files only),
+    // then the tile's four coordinates or the scanline block's y.
     let leader = 4 * usize::from(multipart) + if tiled { 16 } else { 4 };
     for (k, tile) in header.blocks_increasing_y_order().enumerate() {
         if !tile.location.is_largest_resolution_level() {
@@ -150,10 +150,10 @@ pub(super) fn check_exr_chunk_table(
                 ));
             }
         }
-        let declared = le_u32(bytes, at + leader - 4)
+        let declared = le_u32(bytes, at + leader)
             .map(|v| v as i32)
             .ok_or_else(|| format!("the file ends inside chunk {k}'s header (at byte {at})"))?;
-        let follow = len - (at + leader).min(len);
+        let follow = len - (at + leader + 4).min(len);
         if usize::try_from(declared).map_or(true, |size| size > follow) {
             return Err(format!(
                 "chunk {k} (at byte {at}) declares {declared} bytes of pixel data, but only \
@@ -198,8 +198,8 @@ pub(super) fn check_exr_expansion(
         return Ok(());
     }
     Err(format!(
-        "a {} chunk of {stored} bytes declares a block of {block_bytes} bytes, more than \
-         that compression can expand it to ({ratio}x)",
+        "a chunk of {stored} bytes ({:?}) declares a block of {block_bytes} bytes, more than \
+         its compression can expand it to ({ratio}x)",
         header.compression
     ))
 }
@@ -216,6 +216,41 @@ pub(super) fn hdr_scanline_believable(width: usize, bytes_left: usize) -> bool {
 /// Buffer bytes of one Radiance scanline (decoded `f32` RGB and the decoder's own
 /// RGBE line) above which [`hdr_scanline_believable`] asks for data.
 const WIDE_SCANLINE_BYTES: usize = 16 << 20;
+
+/// Checks that a PNG or JPEG of `width` × `height` texels can be coded in `len`
+/// bytes, before the decoder allocates the image (`png` selects the format;
+/// `bits_per_pixel` is the PNG's own, before any palette or bit-depth expansion):
+/// - PNG: its deflate stream carries every row (a filter byte and the row's
+///   packed samples), and deflate expands a byte at most 1032 times;
+/// - JPEG: every 8×8 block of the full-resolution component takes at least one bit
+///   (its DC code; Huffman codes are never shorter).
+pub(super) fn ldr_data_fits(
+    png: bool,
+    width: usize,
+    height: usize,
+    bits_per_pixel: usize,
+    len: usize,
+) -> Result<(), String> {
+    let reachable = len.saturating_add(EXPANSION_SLACK);
+    let (needed, unit, capacity) = if png {
+        let row = 1 + width.saturating_mul(bits_per_pixel).div_ceil(8);
+        (
+            row.saturating_mul(height),
+            "bytes of rows",
+            reachable.saturating_mul(1032),
+        )
+    } else {
+        let blocks = width.div_ceil(8).saturating_mul(height.div_ceil(8));
+        (blocks, "8x8 blocks", reachable.saturating_mul(8))
+    };
+    if needed <= capacity {
+        return Ok(());
+    }
+    Err(format!(
+        "a {width}x{height} image needs {needed} {unit}, more than its {len} bytes can code \
+         (at most {capacity})"
+    ))
+}
 
 #[cfg(test)]
 mod tests {
@@ -250,5 +285,13 @@ mod tests {
         assert!(hdr_scanline_believable(16384, 0));
         assert!(!hdr_scanline_believable(1 << 28, 1000));
         assert!(hdr_scanline_believable(1 << 28, 1 << 24));
+    }
+
+    #[test]
+    fn ldr_sizes_need_data() {
+        assert!(ldr_data_fits(true, 16384, 8192, 24, 400_000).is_ok());
+        assert!(ldr_data_fits(true, 16384, 16384, 24, 600).is_err());
+        assert!(ldr_data_fits(false, 16384, 8192, 24, 300_000).is_ok());
+        assert!(ldr_data_fits(false, 65535, 65535, 24, 600).is_err());
     }
 }

@@ -25,7 +25,7 @@ mod bounds;
 
 use bounds::{
     check_exr_chunk_table, check_exr_expansion, exr_block_bytes, hdr_scanline_believable,
-    IN_FLIGHT_BYTES,
+    ldr_data_fits, IN_FLIGHT_BYTES,
 };
 
 use crate::color::srgb_to_linear;
@@ -1397,8 +1397,8 @@ fn decode_ldr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     use image::codecs::{jpeg::JpegDecoder, png::PngDecoder};
 
     let image = match ctx.format {
-        ImageFormat::Png => decode_with(ctx, PngDecoder::new(Cursor::new(bytes)))?,
-        _ => decode_with(ctx, JpegDecoder::new(Cursor::new(bytes)))?,
+        ImageFormat::Png => decode_with(ctx, bytes.len(), PngDecoder::new(Cursor::new(bytes)))?,
+        _ => decode_with(ctx, bytes.len(), JpegDecoder::new(Cursor::new(bytes)))?,
     };
     let mut notes = Vec::new();
     let color = image.color();
@@ -1433,13 +1433,24 @@ fn decode_ldr(ctx: &Ctx<'_>, bytes: &[u8]) -> Result<Decoded> {
     })
 }
 
-/// Checks the declared size, then decodes all pixels.
+/// Checks the declared size, against the limit and against the `len` bytes of
+/// input, then decodes all pixels.
 fn decode_with<D: image::ImageDecoder>(
     ctx: &Ctx<'_>,
+    len: usize,
     decoder: image::ImageResult<D>,
 ) -> Result<image::DynamicImage> {
     let decoder = decoder.map_err(|e| ctx.decode_error(e.to_string()))?;
     let (width, height) = decoder.dimensions();
     ctx.check_dimensions(width as usize, height as usize)?;
+    let bits = usize::from(decoder.original_color_type().bits_per_pixel());
+    ldr_data_fits(
+        ctx.format == ImageFormat::Png,
+        width as usize,
+        height as usize,
+        bits,
+        len,
+    )
+    .map_err(|d| ctx.decode_error(d))?;
     image::DynamicImage::from_decoder(decoder).map_err(|e| ctx.decode_error(e.to_string()))
 }
