@@ -281,6 +281,38 @@ def test_errors(tmp_path):
             envlight.EnvironmentLight.from_array(sky(), **kw)
 
 
+HOSTILE = pathlib.Path(__file__).resolve().parents[2] / "fuzz/regressions/load/exr-chunk-size-1.9GB.exr"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="address-space limits are set with setrlimit on Linux")
+def test_a_hostile_file_is_an_exception_under_a_512_mib_address_space_limit():
+    # A 612-byte OpenEXR file (a fuzzing find) once made the loader reserve 1.9 GB,
+    # which under an address-space limit aborted the interpreter: now an exception
+    # naming the file, in a child process limited to 512 MiB.
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (512 << 20, 512 << 20))
+
+    script = (
+        "import sys, envlight\n"
+        "try:\n"
+        "    envlight.EnvironmentLight(sys.argv[1])\n"
+        "except OSError as error:\n"
+        "    print(type(error).__name__, error)\n"
+        "    sys.exit(3)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script, str(HOSTILE)],
+        capture_output=True,
+        text=True,
+        preexec_fn=limit,
+        env={**os.environ, "OPENBLAS_NUM_THREADS": "1"},
+    )
+    assert out.returncode == 3, (out.returncode, out.stdout, out.stderr)
+    assert HOSTILE.name in out.stdout, out.stdout
+
+
 def test_threads_give_identical_results(light):
     u = uniform_u(100000, 8)
     want = light.sample(u)

@@ -381,6 +381,29 @@ fn error_paths_are_statuses_and_messages() {
     }
 }
 
+/// A 612-byte OpenEXR file that once made the loader reserve 1.9 GB (a fuzzing
+/// find): under a 512 MiB address-space limit, where that reservation aborted the
+/// process, loading it must be a status and a message naming it.
+#[test]
+fn a_hostile_file_is_a_status_under_a_512_mib_address_space_limit() {
+    let Some(b) = programs() else { return };
+    let hostile = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/regressions/load/exr-chunk-size-1.9GB.exr");
+    assert!(
+        hostile.is_file(),
+        "{} is in the repository",
+        hostile.display()
+    );
+    for name in ["pc_errors_shared", "cmake_errors_static"] {
+        let out = run(Command::new("sh")
+            .args(["-c", "ulimit -v 524288 && exec \"$@\"", "sh"])
+            .arg(&b.programs[name])
+            .arg(b.work.path())
+            .arg(&hostile));
+        assert!(out.ends_with("0 failures\n"), "{name}:\n{out}");
+    }
+}
+
 #[test]
 fn eight_threads_get_the_single_threaded_rows() {
     let Some(b) = programs() else { return };

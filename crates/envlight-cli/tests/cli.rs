@@ -1127,6 +1127,24 @@ fn garbage_bytes_are_an_error_naming_the_file() {
     assert_error(envlight().arg("info").arg(&path), "cut.pfm");
 }
 
+/// A 612-byte OpenEXR file that once made the loader reserve 1.9 GB (a fuzzing
+/// find) and, under an address-space limit, abort: now exit 1 naming the file,
+/// under a 512 MiB limit.
+#[test]
+fn a_hostile_file_is_an_error_under_a_512_mib_address_space_limit() {
+    let hostile = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/regressions/load/exr-chunk-size-1.9GB.exr");
+    let binary = assert_cmd::cargo::cargo_bin("envlight");
+    assert_error(
+        Command::new("sh")
+            .args(["-c", "ulimit -v 524288 && exec \"$@\"", "sh"])
+            .arg(&binary)
+            .arg("info")
+            .arg(&hostile),
+        "exr-chunk-size-1.9GB.exr",
+    );
+}
+
 #[test]
 fn truncated_real_maps_are_errors_naming_the_file() {
     let Some(src) = envmaps() else { return };

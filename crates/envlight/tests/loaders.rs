@@ -669,6 +669,71 @@ fn exr_round_trip_float_half_scanline_and_tiled() {
     }
 }
 
+/// Images above the loader's 16 MiB first allocation grow from the top as blocks
+/// decode, and blocks that arrive further down are held until half the image has
+/// decoded: every line order and block shape must come out texel for texel.
+#[test]
+fn large_exr_images_load_in_any_block_order() {
+    use exr::prelude::{Blocks, Compression, Encoding, LineOrder, Vec2};
+    let (w, h) = (1600, 1000); // 1.6M texels, 19 MB decoded
+    let texel = |x: usize, y: usize| [(x % 251) as f32, (y % 241) as f32, ((x * y) % 239) as f32];
+    let [b, g, r] = bgr_planes(texel, w, h);
+    for (what, blocks, line_order) in [
+        (
+            "scanlines top-down",
+            Blocks::ScanLines,
+            LineOrder::Increasing,
+        ),
+        (
+            "scanlines bottom-up",
+            Blocks::ScanLines,
+            LineOrder::Decreasing,
+        ),
+        (
+            "tiles top-down",
+            Blocks::Tiles(Vec2(96, 64)),
+            LineOrder::Increasing,
+        ),
+        (
+            "tiles bottom-up",
+            Blocks::Tiles(Vec2(96, 64)),
+            LineOrder::Decreasing,
+        ),
+    ] {
+        let encoding = Encoding {
+            compression: Compression::ZIP16,
+            blocks,
+            line_order,
+        };
+        let layer = exr_files::layer(
+            (w, h),
+            None,
+            encoding,
+            vec![
+                ("B", exr_files::samples(false, b.clone())),
+                ("G", exr_files::samples(false, g.clone())),
+                ("R", exr_files::samples(false, r.clone())),
+            ],
+        );
+        let bytes = exr_files::to_bytes(&exr_files::image(vec![layer], None));
+        let loaded = load_mem(what, &bytes);
+        assert_eq!(
+            (loaded.image.width(), loaded.image.height()),
+            (w, h),
+            "{what}"
+        );
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(
+                    loaded.image.texel(x, y),
+                    texel(x, y),
+                    "{what}: texel ({x}, {y})"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn exr_uint_channels_load_as_numbers() {
     let plane = |c: u32| -> Vec<u32> { (0..(W * H) as u32).map(|i| i * 3 + c).collect() };

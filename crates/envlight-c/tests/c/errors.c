@@ -3,7 +3,10 @@
  * naming the file, texel or argument; nothing crashes, nothing leaks (this
  * program runs under valgrind memcheck in tests/c_programs.rs).
  *
- *   errors DIR     (a writable directory for a garbage file)
+ *   errors DIR [FILE...]
+ * DIR is a writable directory for a garbage file; each FILE is a malformed map
+ * that must load as ENVLIGHT_ERROR_FORMAT with a message naming it (the tests run
+ * this under an address-space limit with files that declare huge sizes).
  * Exit status 0 when every check holds; each failed check prints a line.
  */
 #include <math.h>
@@ -53,8 +56,8 @@ int main(int argc, char **argv) {
     size_t k;
     FILE *f;
 
-    if (argc != 2) {
-        fprintf(stderr, "usage: errors DIR\n");
+    if (argc < 2) {
+        fprintf(stderr, "usage: errors DIR [FILE...]\n");
         return 2;
     }
     for (k = 0; k < sizeof rgb / sizeof rgb[0]; k++) rgb[k] = 0.25f + 0.01f * (float)k;
@@ -82,6 +85,9 @@ int main(int argc, char **argv) {
     expect("truncated file", envlight_light_load(path, NULL, &light), ENVLIGHT_ERROR_FORMAT,
            "truncated.hdr");
     expect("a directory", envlight_light_load(argv[1], NULL, &light), ENVLIGHT_ERROR_IO, argv[1]);
+    for (k = 2; k < (size_t)argc; k++)
+        expect(argv[k], envlight_light_load(argv[k], NULL, &light), ENVLIGHT_ERROR_FORMAT,
+               argv[k]);
 
     /* Texels and sizes. */
     rgb[3 * (2 * 8 + 5) + 1] = NAN;

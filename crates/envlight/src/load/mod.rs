@@ -1017,19 +1017,22 @@ fn check_dwa_chunk(chunk: &exr::block::chunk::Chunk, block_bytes: usize) -> Resu
     Ok(())
 }
 
-/// An OpenEXR image's texels as its blocks decode. An image of up to
-/// [`CANVAS_AT_ONCE`] texels is allocated at once; a larger one only once half of
-/// its texels have decoded, the blocks before it held on their own, so a file
-/// that declares a large image but holds little data never has it allocated.
+/// An OpenEXR image's texels as its blocks decode, allocated as the decoded data
+/// grows: an image of up to [`CANVAS_AT_ONCE`] texels at once; a larger one from
+/// the top, row by row, as far as twice the texels decoded so far. A block further
+/// down (a file stored bottom-up, or in random order) is held on its own until
+/// half of the image has decoded. So a file that declares a large image but holds
+/// little data never has the image allocated.
 struct Canvas {
     width: usize,
     texels: usize,
-    full: Option<Vec<[f32; 3]>>,
+    /// The image's top rows, zero where no block has decoded yet.
+    rows: Vec<[f32; 3]>,
     held: Vec<Region>,
-    held_texels: usize,
+    decoded: usize,
 }
 
-/// One block's rectangle, with its own texels while the canvas is not allocated.
+/// One block's rectangle, with its own texels when it lies below the rows.
 struct Region {
     x0: usize,
     y0: usize,
@@ -1047,22 +1050,45 @@ impl Canvas {
         Self {
             width,
             texels,
-            full: (texels <= CANVAS_AT_ONCE).then(|| vec![[0.0; 3]; texels]),
+            rows: if texels <= CANVAS_AT_ONCE {
+                vec![[0.0; 3]; texels]
+            } else {
+                Vec::new()
+            },
             held: Vec::new(),
-            held_texels: 0,
+            decoded: 0,
         }
+    }
+
+    /// Extends the rows to `end` texels if that is at most twice the texels
+    /// decoded (or [`CANVAS_AT_ONCE`]); the capacity at least doubles each time,
+    /// never past the image.
+    fn grow(&mut self, end: usize) -> bool {
+        if end <= self.rows.len() {
+            return true;
+        }
+        if end > CANVAS_AT_ONCE.max(2 * self.decoded) {
+            return false;
+        }
+        if end > self.rows.capacity() {
+            let capacity = end.max(2 * self.rows.capacity()).min(self.texels);
+            self.rows.reserve_exact(capacity - self.rows.len());
+        }
+        self.rows.resize(end, [0.0; 3]);
+        true
     }
 
     /// Starts the block of `width` × `height` texels at (`x0`, `y0`), which lies
     /// inside the image.
     fn begin(&mut self, x0: usize, y0: usize, width: usize, height: usize) -> Region {
-        let own = self.full.is_none().then(|| vec![[0.0; 3]; width * height]);
+        self.decoded += width * height;
+        let in_rows = self.grow((y0 + height) * self.width);
         Region {
             x0,
             y0,
             width,
             height,
-            own,
+            own: (!in_rows).then(|| vec![[0.0; 3]; width * height]),
         }
     }
 
@@ -1078,37 +1104,33 @@ impl Canvas {
         if dy >= region.height || dx.checked_add(count)? > region.width {
             return None;
         }
-        match (&mut region.own, &mut self.full) {
-            (Some(own), _) => own.get_mut(dy * region.width + dx..)?.get_mut(..count),
-            (None, Some(full)) => full.get_mut(y * self.width + x..)?.get_mut(..count),
-            (None, None) => None,
-        }
+        let (texels, start) = match &mut region.own {
+            Some(own) => (own, dy * region.width + dx),
+            None => (&mut self.rows, y * self.width + x),
+        };
+        texels.get_mut(start..start + count)
     }
 
-    /// Ends `region`: its texels go into the image, or are held until half of the
-    /// image has decoded.
+    /// Ends `region`: a held block waits until half of the image has decoded,
+    /// then all held blocks go into the rows.
     fn end(&mut self, region: Region) {
-        if region.own.is_none() {
-            return;
+        if region.own.is_some() {
+            self.held.push(region);
         }
-        self.held_texels += region.width * region.height;
-        self.held.push(region);
-        if 2 * self.held_texels >= self.texels {
-            let mut full = vec![[0.0; 3]; self.texels];
-            for region in self.held.drain(..) {
+        if !self.held.is_empty() && 2 * self.decoded >= self.texels && self.grow(self.texels) {
+            for region in std::mem::take(&mut self.held) {
                 let own = region.own.unwrap_or_default();
                 for (dy, line) in own.chunks_exact(region.width).enumerate() {
                     let start = (region.y0 + dy) * self.width + region.x0;
-                    full[start..start + region.width].copy_from_slice(line);
+                    self.rows[start..start + region.width].copy_from_slice(line);
                 }
             }
-            self.full = Some(full);
         }
     }
 
-    /// The image, `None` when less than half of it decoded.
+    /// The image, `None` unless every row is there.
     fn finish(self) -> Option<Vec<[f32; 3]>> {
-        self.full
+        (self.rows.len() == self.texels && self.held.is_empty()).then_some(self.rows)
     }
 }
 
