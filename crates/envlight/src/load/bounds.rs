@@ -12,11 +12,11 @@
 //! - a size that is decoded from fewer bytes (decompression, run-length coding)
 //!   must be reachable at the encoding's largest expansion ([`max_expansion`]).
 //!
-//! What this bounds, with the rest of the loader (which holds an image's texels in
-//! blocks until half of them have decoded, and decompresses at most
-//! [`IN_FLIGHT_BYTES`] at once): a load's peak allocation stays within a fixed
-//! 64 MiB, plus a few times the decoded texels, plus the largest expansion of one
-//! chunk's bytes. `tests/memory_bound.rs` measures it with a counting allocator.
+//! What this bounds, with the rest of the loader (which allocates an image as its
+//! texels decode, and decompresses at most [`IN_FLIGHT_BYTES`] at once): a load's
+//! peak allocation stays within a fixed 64 MiB, plus a few times the bytes of the
+//! decoded texels, plus the largest expansion of one chunk's bytes.
+//! `tests/memory_bound.rs` measures it with a counting allocator.
 
 use exr::block::chunk::{Chunk, CompressedBlock};
 use exr::compression::Compression;

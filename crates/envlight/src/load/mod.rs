@@ -6,6 +6,11 @@
 //! - reads the declared width and height first and refuses an image of more than
 //!   [`LoadOptions::max_texels`] texels ([`Error::TooLarge`]) or with a zero side
 //!   ([`Error::InvalidDimensions`]) before it allocates or decodes any texel;
+//! - checks every other size the file declares (OpenEXR offset tables, chunk byte
+//!   counts and decompressed block sizes; Radiance scanline lengths; PNG and JPEG
+//!   image sizes) against the bytes present before allocating for it, and
+//!   allocates the image as its data decodes (see the `bounds` module), so a small
+//!   malformed file cannot ask for gigabytes;
 //! - returns texels as linear Rec.709 RGB with row 0 at the top, whatever the
 //!   file's own row order (PFM stores rows bottom-up; Radiance allows eight
 //!   orientations) and primaries (an OpenEXR `chromaticities` attribute or a
