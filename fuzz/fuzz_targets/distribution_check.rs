@@ -3,7 +3,7 @@
 //
 // Arbitrary f32 grids (any bit pattern: NaN, infinities, subnormals, negatives)
 // through the distributions and the light: no panic, no NaN, and the promises of
-// DESIGN.md §3 on whatever comes out.
+// docs/design.md §3 on whatever comes out.
 
 #[allow(dead_code)]
 fn check_distribution(data: &[u8]) {

@@ -1,4 +1,4 @@
-"""envlight's cosine product sampler (DESIGN.md §6a; the Rust module
+"""envlight's cosine product sampler (docs/design.md §6a; the Rust module
 ``envlight::product``) evaluated with Dr.Jit operations over its exported tables
 (``EnvironmentLight.product_tables()``, docs/gpu-tables.md, "Product tables").
 

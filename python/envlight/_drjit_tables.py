@@ -76,7 +76,7 @@ class TableLight:
 
     ``tables`` is the dict of ``EnvironmentLight.gpu_tables()``; ``mi`` the
     ``mitsuba`` module with a variant set (its ``Float``/``UInt32`` are the types
-    computed with). Directions are in the light's own z-up frame (DESIGN.md §2)
+    computed with). Directions are in the light's own z-up frame (docs/design.md §2)
     before its rotation; the rotation of the parameter block is applied.
 
     Raises ValueError for tables this port does not evaluate (alias sampler, an

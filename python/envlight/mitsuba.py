@@ -125,7 +125,8 @@ def _load_rgb(mi, props):
 
 def _clamp_negative(mi, rgb, name):
     """Negative texels (lossy codecs leave them) clamped to 0, with a warning that
-    counts them (DESIGN.md §5); NaN and infinite texels are left for the light to refuse."""
+    counts them (docs/design.md §5); NaN and infinite texels are left for the light
+    to refuse."""
     negative = (rgb < 0).any(axis=2)
     count = int(negative.sum())
     if count:

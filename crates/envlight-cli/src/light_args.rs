@@ -509,7 +509,7 @@ pub fn warn(message: &str) {
 }
 
 /// `--portal QUAD` (repeatable) and `--at X,Y,Z`: sample the map only through
-/// windows, from one point (DESIGN.md §6d).
+/// windows, from one point (docs/design.md §6d).
 #[derive(Debug, Clone, clap::Args)]
 pub struct PortalArgs {
     /// A portal (a window the map is seen through): the four corners of a planar

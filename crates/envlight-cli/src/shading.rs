@@ -1,5 +1,5 @@
 //! `--normal X,Y,Z`: sampling at a surface with that normal, by light × clamped
-//! cosine (the product sampler, DESIGN.md §6a), instead of by the light alone.
+//! cosine (the product sampler, docs/design.md §6a), instead of by the light alone.
 
 use std::sync::Arc;
 
@@ -11,7 +11,7 @@ use envlight::{
 #[derive(Debug, Clone, clap::Args)]
 pub struct NormalArgs {
     /// Sample (and report pdfs) for a surface with this normal, in proportion to
-    /// radiance × max(0, n·ω) (DESIGN.md §6a), instead of radiance alone: precomputed
+    /// radiance × max(0, n·ω) (docs/design.md §6a), instead of radiance alone: precomputed
     /// tables over patches of the map, and within a patch the light's own density
     /// (--density: piecewise-constant or piecewise-bilinear). Three comma-separated
     /// numbers in world space; any non-zero length (normalised).

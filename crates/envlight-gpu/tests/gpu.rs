@@ -432,7 +432,7 @@ fn broken_shaders_are_rejected() {
 
 /// Orientation, independently of the CPU light: on a map whose texel (i, j) holds
 /// `[i, j, 1]`, the GPU's radiance at each texel's centre direction (from the
-/// harness's own mappings, DESIGN.md §2 and the equal-area square) is that texel,
+/// harness's own mappings, docs/design.md §2 and the equal-area square) is that texel,
 /// rotation included; and the GPU draws its samples where the map is bright.
 #[test]
 fn directions_point_where_the_conventions_say() {

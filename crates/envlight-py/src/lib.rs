@@ -29,7 +29,7 @@ use rayon::prelude::*;
 enum Frame {
     /// The library's: z up.
     ZUp,
-    /// Mitsuba 3's envmap frame (DESIGN.md §6b): `(y, z, −x)` of the z-up direction.
+    /// Mitsuba 3's envmap frame (docs/design.md §6b): `(y, z, −x)` of the z-up direction.
     YUp,
 }
 
@@ -778,7 +778,7 @@ impl PyEnvironmentLight {
         pooled1(py, out)
     }
 
-    /// The invariant checks of DESIGN.md §5 on this light (or, with `normal`, on
+    /// The invariant checks of docs/design.md §5 on this light (or, with `normal`, on
     /// its product sampler at that normal), as `envlight verify` runs them: a
     /// list of dicts with keys `check`, `value`, `threshold`, `samples`, `result`
     /// (`pass`, `FAIL`, `info` or `skip`).

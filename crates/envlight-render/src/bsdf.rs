@@ -181,7 +181,7 @@ impl Bsdf {
 
     /// The factor `f` of the product sampler's target `L(ω) f(ω)` at a surface point
     /// with (world) normal `normal`, facing the viewer, and outgoing direction
-    /// `wo_world` (DESIGN.md §6a). Only a sampling target: a light sample drawn with
+    /// `wo_world` (docs/design.md §6a). Only a sampling target: a light sample drawn with
     /// it is weighted by the true `f(ωo, ωi) cos θi / p(ωi)`.
     ///
     /// - `Diffuse`: the clamped cosine `max(0, n·ω)`, which is exactly the BRDF

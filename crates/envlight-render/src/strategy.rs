@@ -25,7 +25,7 @@ use std::str::FromStr;
 /// [`envlight::ProductSampler`] with the target `L(ω) f(ω)`, where the factor `f` is
 /// [`Bsdf::product_factor`](crate::Bsdf::product_factor): the clamped cosine for
 /// diffuse surfaces (and plastic), the cosine times a GGX lobe proxy of the
-/// surface's roughness for conductors (DESIGN.md §6a). The factor is only the
+/// surface's roughness for conductors (docs/design.md §6a). The factor is only the
 /// sampling target: each light sample is weighted by the true BSDF value times the
 /// cosine over the product pdf, and in `mis-product` both power-heuristic weights
 /// (of the shadow ray and of the BSDF-sampled ray that escapes) use the product pdf

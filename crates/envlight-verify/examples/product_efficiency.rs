@@ -7,7 +7,7 @@
 //! (maps from `../shared/envmaps/`, plus `builtin:sky`).
 //!
 //! With `--glossy`, the table is for the glossy integrand `Y·cos⁺·D` instead (the
-//! GGX lobe proxy of each roughness `α`, DESIGN.md §6a), seen from the direction
+//! GGX lobe proxy of each roughness `α`, docs/design.md §6a), seen from the direction
 //! that puts the brightest texel at the lobe's centre (its mirror image about the
 //! normal) where that direction is above the surface, else from 45° off the
 //! normal: the product's efficiency and the light's own for the same integrand.

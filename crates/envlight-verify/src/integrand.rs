@@ -6,7 +6,7 @@ use envlight::Vec3;
 /// The integrand `g(ω) = Y(L(ω)) · f(ω)` a sampler is checked against: the
 /// luminance of the radiance it reports, times a factor of the direction. A light
 /// sampled alone follows `Y` (`f = 1`); a sampler conditioned on a shading point
-/// follows `Y · max(0, n·ω)`, or `Y` times a BSDF lobe (DESIGN.md §6a). The checks
+/// follows `Y · max(0, n·ω)`, or `Y` times a BSDF lobe (docs/design.md §6a). The checks
 /// use it for support (`p > 0` wherever `g > 0`), unbiasedness (`E[g/p] = ∫ g dω`)
 /// and efficiency (`(∫ g)² / ∫ g²/p`), so a new kind of sampler needs no new check.
 pub struct Integrand<'a> {

@@ -1,9 +1,9 @@
-//! The statistical invariant harness of DESIGN.md §5, written once and run over any
+//! The statistical invariant harness of docs/design.md §5, written once and run over any
 //! sampler of directions on the sphere (Mitsuba 3's chi² harness is the model).
 //!
 //! A sampler is plugged in by implementing [`SphereSampler`]; what it is meant to
 //! follow is an [`Integrand`] (the luminance `Y(ω)` for a light alone, `Y(ω)·f(ω)`
-//! for a sampler conditioned on a shading point, DESIGN.md §6a). Each check is a
+//! for a sampler conditioned on a shading point, docs/design.md §6a). Each check is a
 //! plain function returning a typed report that carries the measured numbers,
 //! prints as one line, judges itself (`verdict`) and gives one table [`Row`]
 //! (measured value, threshold, sample count, pass/fail). [`run`] runs them all.
@@ -15,7 +15,7 @@
 //! links the light should not have to build.
 //!
 //! Independence: everything the harness compares against is computed here, from
-//! DESIGN.md §2 and the equal-area mapping's documented formulas, and not with the
+//! docs/design.md §2 and the equal-area mapping's documented formulas, and not with the
 //! library's own helpers. Its mappings between directions and `(u, v)` are its own
 //! `f64` code: equirectangular ([`direction_at`], [`uv_of`]) and the equal-area
 //! octahedral square ([`square_to_sphere`], [`sphere_to_square`], derived here by
@@ -97,7 +97,7 @@ pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report, CHE
 /// probability 1e-3 per case (but seeds are fixed, so a passing case stays passing).
 pub const ALPHA: f64 = 1e-3;
 
-/// Normalisation tolerance `|1 - ∫ p dω|` (DESIGN.md §5, issue 2).
+/// Normalisation tolerance `|1 - ∫ p dω|` (docs/design.md §5, issue 2).
 pub const NORMALISATION_TOLERANCE: f64 = 1e-3;
 
 /// Relative tolerance of `pdf(sample.ω)` against `sample.pdf`, away from the poles,
@@ -130,7 +130,7 @@ pub const INVERT_TOLERANCE: f64 = 1e-3;
 /// are 6e-8 apart; atan2/acos of an f32 vector add a few more).
 pub const EDGE_BAND: f64 = 5e-7;
 
-/// The poles, "up to" which DESIGN.md §5 holds: directions with `sin θ` below this
+/// The poles, "up to" which docs/design.md §5 holds: directions with `sin θ` below this
 /// (within 1e-4 rad, 0.006°, of a pole; 5e-9 of the sphere) are exempt from the
 /// consistency and support checks and from the `∫Y²/p` quadrature. There the
 /// solid-angle density diverges, a sample may legitimately be refused, and the f32

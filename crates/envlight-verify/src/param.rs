@@ -1,4 +1,4 @@
-//! The harness's own mappings (DESIGN.md §2 and the equal-area square, in f64),
+//! The harness's own mappings (docs/design.md §2 and the equal-area square, in f64),
 //! independent of the library's, and where a direction sits on a sampler's grid.
 
 use crate::sampler::{Grid, SphereSampler};

@@ -1,5 +1,5 @@
 //! A [`PortalLight`] at one point, as a [`SphereSampler`], and the checks that only
-//! make sense for it (DESIGN.md §6d): every sample passes through a portal, the pdf
+//! make sense for it (docs/design.md §6d): every sample passes through a portal, the pdf
 //! is 0 through none, and the normalisation, support, chi-square and
 //! unbiasedness checks with their integrals taken **over the portals' own areas**
 //! (so the portals' edges, where the pdf drops to 0, are edges of the quadrature

@@ -1,4 +1,4 @@
-//! A product sampler at one shading point, as a [`SphereSampler`] (DESIGN.md §6a).
+//! A product sampler at one shading point, as a [`SphereSampler`] (docs/design.md §6a).
 
 use crate::integrand::Integrand;
 use crate::sampler::{sphere_sample, Grid, SphereSample, SphereSampler};

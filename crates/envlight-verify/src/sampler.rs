@@ -21,7 +21,7 @@ pub struct SphereSample {
 /// exemption with it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Grid {
-    /// `width × height` cells of the equirectangular map (DESIGN.md §2): `φ = 2π u`,
+    /// `width × height` cells of the equirectangular map (docs/design.md §2): `φ = 2π u`,
     /// `θ = π v` ([`direction_at`](crate::direction_at)); u wraps, and the poles are singular.
     Equirect {
         /// Cells along u (φ).
@@ -88,7 +88,7 @@ impl Grid {
     }
 }
 
-/// A sampler of directions with a density, the thing DESIGN.md §5 constrains.
+/// A sampler of directions with a density, the thing docs/design.md §5 constrains.
 /// Adding a sampler to a test table means implementing this (usually by
 /// delegation) and adding one line to the table.
 pub trait SphereSampler: Sync {

@@ -6,7 +6,7 @@
 //! solid-angle pdf, and evaluates the pdf and radiance of any direction (for
 //! multiple importance sampling).
 //!
-//! Conventions (see DESIGN.md): right-handed, z up; image point `(u, v)` with u
+//! Conventions (see docs/design.md §2): right-handed, z up; image point `(u, v)` with u
 //! left→right and v top→bottom maps to `θ = π v` (from +z), `φ = 2π u` (from +x
 //! towards +y). Luminance `Y = 0.212671 R + 0.715160 G + 0.072169 B`.
 //!

@@ -1,6 +1,6 @@
-//! Property tests (proptest) for the piecewise-constant distributions of DESIGN.md §3:
-//! random non-negative functions with many exact zeros and values spanning
-//! 1e-30..1e30, on 1 to 299 cells (1D) and up to 24×24 cells (2D).
+//! Property tests (proptest) for the piecewise-constant distributions of
+//! docs/design.md §3: random non-negative functions with many exact zeros and
+//! values spanning 1e-30..1e30, on 1 to 299 cells (1D) and up to 24×24 cells (2D).
 //!
 //! 1024 cases per property from a fixed seed, so CI runs are reproducible; set
 //! `PROPTEST_RNG_SEED` (and `PROPTEST_CASES`) to explore further. Failures are

@@ -1,4 +1,4 @@
-//! DESIGN.md §5 over every sampler and map: one line per case in the tables below,
+//! docs/design.md §5 over every sampler and map: one line per case in the tables below,
 //! the checks themselves in the `envlight-verify` crate.
 //!
 //! Statistics (stated once for all cases, see `envlight_verify::Config`): chi-square at
@@ -84,7 +84,7 @@ use Density::{PiecewiseBilinear, PiecewiseConstant};
 use Mapping::{EqualArea, Equirectangular};
 use Sampler::{Alias, Hierarchical, Inversion};
 
-/// Every check of DESIGN.md §5.
+/// Every check of docs/design.md §5.
 const FULL: Config = Config::SYNTHETIC;
 
 /// Huge dynamic range: the 1e-30 texels have a pdf near 1e-60, below the smallest
@@ -293,7 +293,7 @@ real_maps! {
 
 // ---------------------------------------------------------------------------
 // Orientation: independent of any loader, the direction of a texel is the one
-// DESIGN.md §2 gives.
+// docs/design.md §2 gives.
 // ---------------------------------------------------------------------------
 
 /// θ = π(y+½)/h, φ = 2π(x+½)/w, ω = (sinθ cosφ, sinθ sinφ, cosθ), computed here.

@@ -1,4 +1,4 @@
-//! Product sampling at a shading point (DESIGN.md §6a) through the same invariant
+//! Product sampling at a shading point (docs/design.md §6a) through the same invariant
 //! harness as the light alone (`envlight-verify`): each case is a product sampler
 //! conditioned on one factor, checked against its own integrand `Y(ω)·f(ω)`.
 //!

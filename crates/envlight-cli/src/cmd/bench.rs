@@ -35,7 +35,7 @@ With --json, one object with exactly the keys width, height (of the map as read)
 build_ms, build_ms_1thread, floor_ms, sample_ns, pdf_ns, radiance_ns, \
 batch_samples_per_s, bytes_per_texel (all numbers).\n\n\
 With --normal X,Y,Z, also the product sampler at a surface with that normal (light × \
-max(0, n·ω), DESIGN.md §6a), on one thread: product_point_ns (a new shading point, one \
+max(0, n·ω), docs/design.md §6a), on one thread: product_point_ns (a new shading point, one \
 sample and one pdf: what a renderer pays per shading point), product_sample_ns and \
 product_pdf_ns (a point reused; pdfs of the same random directions as pdf_ns), \
 product_build_ms (building the product sampler on all threads, fastest of --repeat, \

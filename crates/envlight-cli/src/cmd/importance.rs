@@ -32,7 +32,7 @@ equirectangular world view: θ (0° = +z, up) runs down the side, φ (0° = +x, 
 along the bottom, whatever --mapping the light uses. With --samples N the first N \
 directions `envlight sample` would draw (same --seed) are drawn as magenta dots on both \
 panels. With --normal the lower panel is the product sampler's density for a surface \
-with that normal (radiance × max(0, n·ω), DESIGN.md §6a), and the dots its samples. \
+with that normal (radiance × max(0, n·ω), docs/design.md §6a), and the dots its samples. \
 Each pixel is the solid-angle weighted mean of radiance and pdf over points in \
 it, enough to see every texel of maps wider than --width. When the map has a sun (a \
 compact bright source, as `envlight sun` reports it), its disc is outlined in cyan on \

@@ -1,4 +1,4 @@
-//! `envlight verify`: the invariants of DESIGN.md §5, checked on the user's map by
+//! `envlight verify`: the invariants of docs/design.md §5, checked on the user's map by
 //! the library's harness (`envlight-verify`); this file only parses arguments,
 //! shows progress and prints the harness's table.
 
@@ -21,7 +21,7 @@ use crate::shading::{product_sampler, NormalArgs};
 /// Arguments of `envlight verify`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = concat!(
-    "Checks (DESIGN.md §5), printed as a table `check | value | threshold | result`; the \
+    "Checks (docs/design.md §5), printed as a table `check | value | threshold | result`; the \
 exit status is 1 when any check fails. Quadrature and bins follow the light's own cell grid \
 (its texels, or the equal-area square's), in the harness's own mapping code, each point \
 weighted by the exact measure (2π² sin θ du dv, or 4π du dv):\n\

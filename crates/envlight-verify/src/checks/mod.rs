@@ -1,4 +1,4 @@
-//! The checks of DESIGN.md §5 and §6a, one module each.
+//! The checks of docs/design.md §5 and §6a, one module each.
 
 pub mod black;
 pub mod chi_square;

@@ -71,7 +71,7 @@ impl fmt::Display for Support {
 /// probes see every neighbour that can light the cell. Probes are placed in the
 /// grid's own `(u, v)` and mapped by the harness's mapping. On the lat-long map,
 /// probes within [`POLE_BAND_SIN`](crate::POLE_BAND_SIN) of a pole are skipped: "up to the measure-zero
-/// poles" (DESIGN.md §5), widened to where an f32 direction no longer pins θ down;
+/// poles" (docs/design.md §5), widened to where an f32 direction no longer pins θ down;
 /// the equal-area square has no such points.
 pub fn support(s: &dyn SphereSampler, integrand: &Integrand) -> Support {
     let [w, h] = s.grid().map_or([512, 256], |g| g.cells());

@@ -1,6 +1,6 @@
 //! Building an [`EnvironmentLight`]: the option checks and the resampling of a
 //! lat-long input to the light's mapping, the texel-grid importance of
-//! DESIGN.md §4 step 1 and its MIS compensation, the node values of the bilinear
+//! docs/design.md §4 step 1 and its MIS compensation, the node values of the bilinear
 //! density, the 2D sampler over them, and `∫ L dω`.
 
 use super::{Density, EnvironmentLight, LightOptions, Mapping, Planar, Sampler};
@@ -413,7 +413,7 @@ pub(crate) fn node_row_factors(v_nodes: &[f64], mapping: Mapping, node_rows: boo
         .collect()
 }
 
-/// Row `j` of the texel-grid importance of DESIGN.md §4 step 1, written to `out`;
+/// Row `j` of the texel-grid importance of docs/design.md §4 step 1, written to `out`;
 /// returns the row's RGB sums (for `∫ L dω`).
 ///
 /// Importance: `f[j][i] = Y(filtered) · J_j`; for bilinear lookups the filter is
@@ -706,7 +706,7 @@ mod tests {
     use super::*;
 
     /// The importance rows, filter and RGB sums against a texel-by-texel reading of
-    /// DESIGN.md §4 step 1, on small maps where every texel is next to an edge.
+    /// docs/design.md §4 step 1, on small maps where every texel is next to an edge.
     #[test]
     fn importance_rows_match_their_definition() {
         let mut rng = crate::rng::SplitMix64::new(5);

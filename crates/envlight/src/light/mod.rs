@@ -1,7 +1,7 @@
 //! The environment light: an HDR image at infinity, importance sampled in
 //! proportion to its luminance.
 //!
-//! Construction (DESIGN.md §4), for the piecewise-constant density:
+//! Construction (docs/design.md §4), for the piecewise-constant density:
 //! 1. importance `f[j][i] = Y(filtered radiance of texel (i, j)) · J_j`, where `J_j`
 //!    is the mapping's area factor at the row centre (`sin θ_j` for the
 //!    equirectangular map, 1 for the equal-area square). For bilinear lookups the
@@ -714,7 +714,7 @@ fn solid_angle(planar_pdf: f32, inv_jacobian: f32) -> f32 {
 
 impl EnvironmentLight {
     /// Rows `first_row..first_row + out.len() / w` of the texel-grid importance of
-    /// DESIGN.md §4 step 1 (`Y(filtered) · J_j`, never MIS-compensated), `w` values
+    /// docs/design.md §4 step 1 (`Y(filtered) · J_j`, never MIS-compensated), `w` values
     /// per row, whatever the light's sampler and density.
     pub(crate) fn importance_rows(&self, first_row: usize, out: &mut [f32]) {
         let w = self.image.width();

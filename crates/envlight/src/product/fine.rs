@@ -4,7 +4,7 @@
 //!
 //! *Cells* are where the light's density is one piece:
 //! - for the piecewise-constant density, the image's texels (`w × h`), weighted by
-//!   the texel-grid importance `Y(filtered) · J_j` of DESIGN.md §4 step 1 (never
+//!   the texel-grid importance `Y(filtered) · J_j` of docs/design.md §4 step 1 (never
 //!   MIS-compensated), constant over each;
 //! - for the piecewise-bilinear density, the `(w + 1) × (h + 1)` cells between
 //!   its nodes: texel centres (half cells at the image's edges) or, along v for the

@@ -1,4 +1,4 @@
-//! Product sampling at a shading point (DESIGN.md §6a): directions drawn with
+//! Product sampling at a shading point (docs/design.md §6a): directions drawn with
 //! density `p(ω | n) ≈ L(ω) f(ω) / ∫ L f`, exactly normalised and with an exact
 //! pdf, for a factor `f` that is the clamped cosine or the cosine times a glossy
 //! lobe ([`Factor`]), at a cost per shading point of a few light samples.
@@ -213,7 +213,7 @@ pub const HORIZON_BAND: f32 = 0.342_020_14;
 pub const MIN_HORIZON_BAND: f32 = 0.087_155_74;
 
 /// Samples directions at a shading point in proportion to (a close bound of) the
-/// light's radiance times a [`Factor`], with the exact pdf (DESIGN.md §6a; the
+/// light's radiance times a [`Factor`], with the exact pdf (docs/design.md §6a; the
 /// module docs give the scheme and the pdf's formula).
 ///
 /// Guarantees: [`ShadingPoint::pdf`] is the density of [`ShadingPoint::sample`]
