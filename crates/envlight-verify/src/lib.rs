@@ -55,6 +55,7 @@
 #[cfg(test)]
 mod batch_self_checks;
 mod checks;
+mod frame;
 mod integrand;
 pub mod maps;
 mod param;

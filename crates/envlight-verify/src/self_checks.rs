@@ -1,6 +1,7 @@
 //! Self-checks of the harness's own equal-area mapping.
 
-use crate::param::{sphere_to_square, square_to_sphere, Frame};
+use crate::frame::Frame;
+use crate::param::{sphere_to_square, square_to_sphere};
 use crate::sampler::SphereSampler;
 use envlight::light::Mapping;
 use envlight::{EnvImage, LightOptions, Lookup};

@@ -1,6 +1,6 @@
 //! 3. Chi-square goodness of fit of the samples to `pdf()`.
 
-use crate::param::Frame;
+use crate::frame::Frame;
 use crate::quadrature::{Needs, Quadrature, FOLD_SPLIT};
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;

@@ -1,6 +1,6 @@
 //! 2. Consistency of `sample()`, `pdf()` and `invert()`.
 
-use crate::param::{place, Frame, Place};
+use crate::frame::{place, Frame, Place};
 use crate::report::{Row, Verdict};
 use crate::sampler::{Grid, SphereSample, SphereSampler};
 use crate::stats::{finite_rgb, fits, over_sample_chunks};

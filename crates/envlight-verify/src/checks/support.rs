@@ -1,7 +1,7 @@
 //! 4. Support: `p(ω) > 0` wherever the integrand is.
 
+use crate::frame::Frame;
 use crate::integrand::Integrand;
-use crate::param::Frame;
 use crate::report::{Row, Verdict};
 use crate::sampler::SphereSampler;
 use rayon::prelude::*;

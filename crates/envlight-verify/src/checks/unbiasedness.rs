@@ -1,7 +1,7 @@
 //! 5. Unbiasedness of `E[g/p]` against quadrature, and 6. efficiency.
 
+use crate::frame::Frame;
 use crate::integrand::Integrand;
-use crate::param::Frame;
 use crate::quadrature::{Needs, Point, Quadrature};
 use crate::report::{sig, Row, Verdict};
 use crate::sampler::SphereSampler;
