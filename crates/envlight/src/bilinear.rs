@@ -42,8 +42,8 @@ use crate::distribution::{
     ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
-use crate::light::VectorWidth;
 use crate::math::prefetch_ptr;
+use crate::width::{at_width, VectorWidth};
 
 /// The largest `f64` below 1.
 const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
@@ -710,38 +710,6 @@ fn patch_factors(
     factors
 }
 
-/// `$kernel(args, out)` compiled for the vectors `width` names: for AVX2 and
-/// AVX-512 a copy with those target features (the kernels are
-/// `#[inline(always)]`, so the wider instructions reach their loops), else the
-/// baseline's. The kernels use no fused multiply-add, so every width gives the
-/// same bits.
-macro_rules! at_width {
-    ($width:expr, $kernel:ident($args:expr, $out:expr): &$A:ty => $R:ty) => {{
-        #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2")]
-            fn avx2(args: &$A, out: &mut [f32]) -> $R {
-                $kernel(args, out)
-            }
-            #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")]
-            fn avx512(args: &$A, out: &mut [f32]) -> $R {
-                $kernel(args, out)
-            }
-            match $width {
-                // SAFETY: `VectorWidth::detect` names only widths this CPU has.
-                VectorWidth::Avx512 => unsafe { avx512($args, $out) },
-                VectorWidth::Avx2 => unsafe { avx2($args, $out) },
-                VectorWidth::Baseline => $kernel($args, $out),
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            let _ = $width;
-            $kernel($args, $out)
-        }
-    }};
-}
-
 /// One row of patches' inputs to their masses: the top and bottom node values,
 /// the u nodes, the row's height and the number of patches.
 struct MassRow<'a> {
@@ -755,7 +723,9 @@ struct MassRow<'a> {
 /// [`mass_row`] compiled for the vectors `width` names (the same IEEE
 /// operations at every width, so the same weights and sum).
 fn mass_row_at(width: VectorWidth, args: &MassRow<'_>, out: &mut [f32]) -> f64 {
-    at_width!(width, mass_row(args, out): &MassRow<'_> => f64)
+    at_width!(width, fn(args: &MassRow<'_>, out: &mut [f32]) -> f64 {
+        mass_row(args, out)
+    })
 }
 
 /// A row of patches' masses `Δu Δv (a + b + c + d) / 4` (exact, in f64): each
@@ -803,7 +773,9 @@ struct FactorRow<'a> {
 /// operations at every width, so the same factors; AVX-512 divides eight f64 at
 /// a time where the baseline's SSE2 divides two).
 fn factor_row_at(width: VectorWidth, args: &FactorRow<'_>, out: &mut [f32]) {
-    at_width!(width, factor_row(args, out): &FactorRow<'_> => ())
+    at_width!(width, fn(args: &FactorRow<'_>, out: &mut [f32]) {
+        factor_row(args, out)
+    })
 }
 
 /// The sum of patch `i`'s four node values in f64, in [`corners`]' order, from

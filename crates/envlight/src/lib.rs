@@ -59,6 +59,7 @@ pub mod portal;
 pub mod product;
 pub mod rng;
 pub mod sun;
+mod width;
 
 pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};

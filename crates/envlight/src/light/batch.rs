@@ -9,6 +9,7 @@ use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
 use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, radius_and_csc, EQUIRECT_JACOBIAN};
 use crate::math::{is_positive_finite, prefetch_ptr, Vec3};
+use crate::width::VectorWidth;
 use rayon::prelude::*;
 
 impl EnvironmentLight {
@@ -726,56 +727,6 @@ struct CellBlock {
     iu: [u32; QUERY_BLOCK],
     iv: [u32; QUERY_BLOCK],
     inv_jacobian: [f32; QUERY_BLOCK],
-}
-
-/// The vectors the batch kernels are compiled for, picked at run time. The library
-/// is built for the x86-64 baseline, whose vectors (SSE2) hold two f64; AVX2's
-/// (x86-64 CPUs since 2013-2015) hold four, AVX-512's eight. The kernels are
-/// `#[inline(always)]` all the way down so that the wider instructions reach them.
-/// The results are the same at every width: the kernels use no fused
-/// multiply-add, only operations that round alike at any vector width.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub(crate) enum VectorWidth {
-    Baseline,
-    Avx2,
-    Avx512,
-}
-
-impl VectorWidth {
-    /// The widest vectors the CPU has, or narrower ones where the environment
-    /// variable `ENVLIGHT_VECTOR_WIDTH` asks for them (`baseline` or `avx2`; for
-    /// benchmarks and for checking a result on another path). Decided once per
-    /// process.
-    #[inline]
-    pub(crate) fn detect() -> Self {
-        static WIDTH: std::sync::OnceLock<VectorWidth> = std::sync::OnceLock::new();
-        *WIDTH.get_or_init(|| {
-            let widest = Self::widest();
-            match std::env::var("ENVLIGHT_VECTOR_WIDTH").as_deref() {
-                Ok("baseline") => Self::Baseline,
-                Ok("avx2") => widest.min(Self::Avx2),
-                _ => widest,
-            }
-        })
-    }
-
-    /// The widest vectors the CPU has.
-    fn widest() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("avx512vl")
-                && std::arch::is_x86_feature_detected!("avx512dq")
-                && std::arch::is_x86_feature_detected!("avx512bw")
-            {
-                return Self::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                return Self::Avx2;
-            }
-        }
-        Self::Baseline
-    }
 }
 
 /// A batch kernel compiled for AVX2 and for AVX-512 ([`VectorWidth`]).

@@ -1,12 +1,12 @@
 //! [`EnvironmentLight::efficiency`]: the sampling efficiency
 //! `(∫ Y dω)² / ∫ (Y² / p) dω` by Gauss-Legendre quadrature over the image.
 
-use super::batch::VectorWidth;
 use super::build::{importance_row, LuminanceRows};
 use super::{EnvironmentLight, Mapping, Planar};
 use crate::equal_area::EQUAL_AREA_JACOBIAN;
 use crate::image::{Lookup, WrapU};
 use crate::mapping::EQUIRECT_JACOBIAN;
+use crate::width::{at_width, VectorWidth};
 use rayon::prelude::*;
 
 impl EnvironmentLight {
@@ -344,24 +344,10 @@ const LANES: usize = 8;
 /// the loop runs in vector lanes and the result does not depend on their width;
 /// compiled for the widest vectors the CPU has.
 fn interior_moments(blended: &[f32], inv_p: &[f64], inv_q: &[f64], lookup: Lookup) -> [f64; 3] {
-    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2"))]
-    fn avx2(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
-        interior_lanes(blended, inv_p, inv_q, bilinear)
-    }
-    #[cfg_attr(
-        target_arch = "x86_64",
-        target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw")
-    )]
-    fn avx512(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
-        interior_lanes(blended, inv_p, inv_q, bilinear)
-    }
     let bilinear = lookup != Lookup::Nearest;
-    match VectorWidth::detect() {
-        // SAFETY: each wide version runs only on a CPU with its features.
-        VectorWidth::Avx512 => unsafe { avx512(blended, inv_p, inv_q, bilinear) },
-        VectorWidth::Avx2 => unsafe { avx2(blended, inv_p, inv_q, bilinear) },
-        VectorWidth::Baseline => interior_lanes(blended, inv_p, inv_q, bilinear),
-    }
+    at_width!(VectorWidth::detect(), fn(blended: &[f32], inv_p: &[f64], inv_q: &[f64], bilinear: bool) -> [f64; 3] {
+        interior_lanes(blended, inv_p, inv_q, bilinear)
+    })
 }
 
 /// The body of [`interior_moments`].

@@ -27,7 +27,6 @@
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 mod batch;
-pub(crate) use batch::VectorWidth;
 mod build;
 pub(crate) use build::bilinear_nodes;
 pub use build::table_reduction;
