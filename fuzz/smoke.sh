@@ -10,6 +10,19 @@
 # already (it does `distribution` and `load`, the loader targets' shared folder, on
 # every `cargo test`).
 #
+# Memory: every libFuzzer run (timed and replay) gets -rss_limit_mb=1024
+# -malloc_limit_mb=1024, so an input that makes the loader take 2 GB fails the run
+# as an out-of-memory. The 612-byte EXR in fuzz/regressions/load/ (issue 49) took
+# 1.9 GB before 728337f and passed under the old -rss_limit_mb=4096; replayed
+# through load_any under 1024, the code before the fix stops with "ERROR: libFuzzer:
+# out-of-memory (used: 1067Mb; limit: 1024Mb)" (this script leaves that folder to
+# `cargo test`, where crates/envlight/tests/memory_bound.rs holds every input to a
+# much tighter bound with a counting allocator). The RSS limit is the one that acts:
+# libFuzzer checks the peak RSS once a second, so a block that is reserved and
+# written counts, a reservation never written does not. -malloc_limit_mb is
+# accepted but needs a sanitizer's malloc hooks, which a --sanitizer none build
+# lacks; it is passed so that a sanitizer build keeps the same limit per allocation.
+#
 # Needs cargo-fuzz (`cargo install cargo-fuzz --locked`); runs without sanitizers,
 # so stable Rust is enough. A crash leaves its input in fuzz/artifacts/<target>/.
 set -euo pipefail
@@ -23,6 +36,9 @@ case "$seconds" in
         exit 2
         ;;
 esac
+
+# See the header: 1024 MB, so a 2 GB allocation fails the run.
+memory_limits=(-rss_limit_mb=1024 -malloc_limit_mb=1024)
 
 targets=$(cargo fuzz list)
 if [ -z "$targets" ]; then
@@ -78,14 +94,14 @@ for target in $targets; do
     corpus="$work/corpus-$target"
     cp -R "seeds/$target" "$corpus"
     echo "==> $target: ${seconds}s from $(find "$corpus" -type f | wc -l) seeds"
-    run "$target" "$target" "$corpus" -- -max_total_time="$seconds" -rss_limit_mb=4096
+    run "$target" "$target" "$corpus" -- -max_total_time="$seconds" "${memory_limits[@]}"
 
     if [ -d "regressions/$target" ] &&
         ! grep -qF "inputs(\"$target\")" ../crates/envlight/tests/fuzz_regressions.rs; then
         mapfile -t inputs < <(find "regressions/$target" -type f | sort)
         if [ "${#inputs[@]}" -gt 0 ]; then
             echo "==> $target: replaying ${#inputs[@]} regression inputs"
-            run "$target-regressions" "$target" "${inputs[@]}" -- -rss_limit_mb=4096
+            run "$target-regressions" "$target" "${inputs[@]}" -- "${memory_limits[@]}"
         fi
     fi
 done
