@@ -3,7 +3,8 @@
 
 use envlight::gpu::{GpuTableOptions, GpuTables, RadianceFormat};
 
-use crate::{deref, deref_mut, envlight_light, envlight_status, put, run, value, Failure};
+use crate::boundary::{cleared, deref, free, put, run, value, write_whole, Failure};
+use crate::{envlight_light, envlight_status};
 
 /// How `envlight_light_gpu_tables` stores the radiance image.
 #[repr(u32)]
@@ -34,9 +35,16 @@ pub extern "C" fn envlight_light_gpu_tables(
 ) -> envlight_status {
     const F: &str = "envlight_light_gpu_tables";
     run(F, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = std::ptr::null_mut();
-        let light = unsafe { deref(light, F, "light") }?;
+        // SAFETY: by the C contract `out` is NULL or points to a writable
+        // `envlight_gpu_tables *`, and `light` is NULL or a light from
+        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
+        // reject NULL and misaligned pointers.
+        let (out, light) = unsafe {
+            (
+                cleared(out, std::ptr::null_mut(), F, "out")?,
+                deref(light, F, "light")?,
+            )
+        };
         let radiance = match radiance_format {
             0 => RadianceFormat::F32,
             1 => RadianceFormat::F16,
@@ -64,7 +72,10 @@ pub extern "C" fn envlight_light_gpu_tables(
 /// Frees GPU tables (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_gpu_tables_free(tables: *mut envlight_gpu_tables) {
-    crate::free(tables);
+    // SAFETY: by the C contract a non-NULL `tables` came from
+    // envlight_light_gpu_tables (which `put`s an `envlight_gpu_tables`) and is freed
+    // once, after the last use of the buffers it lent.
+    unsafe { free(tables) };
 }
 
 /// Which of the three buffers `envlight_gpu_tables_buffer` returns.
@@ -91,9 +102,12 @@ pub extern "C" fn envlight_gpu_tables_buffer(
 ) -> *const u32 {
     const F: &str = "envlight_gpu_tables_buffer";
     value(F, std::ptr::null(), || {
-        let words = unsafe { deref_mut(words, F, "words") }?;
-        *words = 0;
-        let t = &unsafe { deref(tables, F, "tables") }?.tables;
+        // SAFETY: by the C contract `words` is NULL or one writable `size_t`, and
+        // `tables` NULL or a handle from envlight_light_gpu_tables not yet freed
+        // (only read); the helpers reject NULL and misaligned pointers.
+        let (words, tables) =
+            unsafe { (cleared(words, 0, F, "words")?, deref(tables, F, "tables")?) };
+        let t = &tables.tables;
         let data: &[u32] = match buffer {
             0 => t.params(),
             1 => t.tables(),
@@ -122,12 +136,15 @@ pub extern "C" fn envlight_gpu_tables_to_bytes(
 ) -> usize {
     const F: &str = "envlight_gpu_tables_to_bytes";
     value(F, 0, || {
+        // SAFETY: by the C contract `tables` is NULL or a handle from
+        // envlight_light_gpu_tables not yet freed; it is only read (its bytes are
+        // built once, under `OnceLock`'s lock); `deref` rejects NULL and misaligned
+        // pointers.
         let t = unsafe { deref(tables, F, "tables") }?;
         let bytes = t.bytes.get_or_init(|| t.tables.to_bytes());
-        if !buf.is_null() && len >= bytes.len() {
-            // SAFETY: the caller gives `len` writable bytes at `buf`.
-            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), buf, bytes.len()) };
-        }
+        // SAFETY: by the C contract a non-NULL `buf` holds `len` writable bytes of
+        // the caller's, which cannot overlap `bytes`, owned by the handle.
+        unsafe { write_whole(bytes, buf, len) };
         Ok(bytes.len())
     })
 }

@@ -1,13 +1,12 @@
 //! Portals: the light seen only through windows (planar convex quads), sampled
 //! from a point in proportion to the radiance that comes through them
-//! (DESIGN.md §6d).
+//! (docs/design.md §6d).
 
 use std::sync::Arc;
 
-use crate::{
-    as_vec3, deref, deref_mut, draw_batch, drop_non_finite, envlight_light, envlight_sample,
-    envlight_status, finite_u, put, read, run, slice, slice_mut, to_c, value, vec3, Failure,
-};
+use crate::boundary::{cleared, deref, free, put, read, run, slice, slice_mut, value, Failure};
+use crate::sample::{as_vec3, draw_batch, drop_non_finite, finite_u, to_c, vec3};
+use crate::{envlight_light, envlight_sample, envlight_status};
 use envlight::portal::{Portal, PortalLight, PortalOptions};
 
 /// A light seen through portals. Opaque; a `const` pointer serves any number of
@@ -33,13 +32,23 @@ pub extern "C" fn envlight_portal_light_new(
 ) -> envlight_status {
     const F: &str = "envlight_portal_light_new";
     run(F, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = std::ptr::null_mut();
-        let light = unsafe { deref(light, F, "light") }?;
+        // SAFETY: by the C contract `out` is NULL or points to a writable
+        // `envlight_portal_light *`, and `light` is NULL or a light from
+        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
+        // reject NULL and misaligned pointers.
+        let (out, light) = unsafe {
+            (
+                cleared(out, std::ptr::null_mut(), F, "out")?,
+                deref(light, F, "light")?,
+            )
+        };
         if count == 0 {
             return Err(Failure::argument(F, "count must be at least 1"));
         }
-        let quads: &[[f32; 12]] = unsafe { slice(corners, count, F, "corners") }?;
+        // SAFETY: by the C contract `corners` is NULL or holds `count · 12` floats,
+        // only read during the call; `slice` rejects a NULL or misaligned pointer
+        // and a size past `isize::MAX` bytes.
+        let quads = unsafe { slice::<f32, 12>(corners, count, F, "corners") }?;
         let portals = quads
             .iter()
             .enumerate()
@@ -67,7 +76,10 @@ pub extern "C" fn envlight_portal_light_new(
 /// Frees a portal light (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_portal_light_free(light: *mut envlight_portal_light) {
-    crate::free(light);
+    // SAFETY: by the C contract a non-NULL `light` came from
+    // envlight_portal_light_new (which `put`s an `envlight_portal_light`) and is
+    // freed once.
+    unsafe { free(light) };
 }
 
 /// Draws a direction from the point `point` through the portals, for `u` in
@@ -83,11 +95,18 @@ pub extern "C" fn envlight_portal_light_sample(
 ) -> bool {
     const F: &str = "envlight_portal_light_sample";
     value(F, false, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = envlight_sample::default();
-        let light = unsafe { deref(light, F, "light") }?;
-        let p = unsafe { read(point, F, "point") }?;
-        let u = unsafe { read(u, F, "u") }?;
+        // SAFETY: by the C contract `out` is NULL or one writable sample, `light`
+        // NULL or a portal light not yet freed (only read; its lazily built tables
+        // are behind a lock), `point` NULL or 3 floats and `u` NULL or 2, `out`
+        // overlapping neither; the helpers reject NULL and misaligned pointers.
+        let (out, light, p, u) = unsafe {
+            (
+                cleared(out, envlight_sample::default(), F, "out")?,
+                deref(light, F, "light")?,
+                read::<3>(point, F, "point")?,
+                read::<2>(u, F, "u")?,
+            )
+        };
         if finite_u(u) {
             *out = to_c(light.light.sample(vec3(p), u));
         }
@@ -106,9 +125,16 @@ pub extern "C" fn envlight_portal_light_pdf(
 ) -> f32 {
     const F: &str = "envlight_portal_light_pdf";
     value(F, 0.0, || {
-        let light = unsafe { deref(light, F, "light") }?;
-        let p = unsafe { read(point, F, "point") }?;
-        let d = unsafe { read(direction, F, "direction") }?;
+        // SAFETY: by the C contract `light` is NULL or a portal light not yet
+        // freed (only read), and `point` and `direction` are NULL or 3 floats each;
+        // the helpers reject NULL and misaligned pointers.
+        let (light, p, d) = unsafe {
+            (
+                deref(light, F, "light")?,
+                read::<3>(point, F, "point")?,
+                read::<3>(direction, F, "direction")?,
+            )
+        };
         Ok(light.light.pdf(vec3(p), vec3(d)))
     })
 }
@@ -125,11 +151,20 @@ pub extern "C" fn envlight_portal_light_sample_batch(
 ) -> envlight_status {
     const F: &str = "envlight_portal_light_sample_batch";
     run(F, || {
-        let light = &unsafe { deref(light, F, "light") }?.light;
-        let points: &[[f32; 3]] = unsafe { slice(points, n, F, "points") }?;
+        // SAFETY: by the C contract `light` is NULL or a portal light not yet
+        // freed (only read), and for n > 0 `points` holds 3n floats, `u` 2n floats
+        // and `out` n writable samples apart from both; the helpers take nothing for
+        // n = 0 and otherwise reject NULL, misaligned and overflowing arrays.
+        let (light, points, u, out) = unsafe {
+            (
+                deref(light, F, "light")?,
+                slice::<f32, 3>(points, n, F, "points")?,
+                slice::<f32, 2>(u, n, F, "u")?,
+                slice_mut::<envlight_sample, 1>(out, n, F, "out")?,
+            )
+        };
+        let light = &light.light;
         let points = as_vec3(points);
-        let u: &[[f32; 2]] = unsafe { slice(u, n, F, "u") }?;
-        let out: &mut [[envlight_sample; 1]] = unsafe { slice_mut(out, n, F, "out") }?;
         draw_batch(out.as_flattened_mut(), |range, samples| {
             let u = &u[range.clone()];
             light.sample_batch(&points[range], u, samples);
@@ -151,11 +186,22 @@ pub extern "C" fn envlight_portal_light_pdf_batch(
 ) -> envlight_status {
     const F: &str = "envlight_portal_light_pdf_batch";
     run(F, || {
-        let light = &unsafe { deref(light, F, "light") }?.light;
-        let points: &[[f32; 3]] = unsafe { slice(points, n, F, "points") }?;
-        let dirs: &[[f32; 3]] = unsafe { slice(directions, n, F, "directions") }?;
-        let out: &mut [[f32; 1]] = unsafe { slice_mut(pdf, n, F, "pdf") }?;
-        light.pdf_batch(as_vec3(points), as_vec3(dirs), out.as_flattened_mut());
+        // SAFETY: by the C contract `light` is NULL or a portal light not yet
+        // freed (only read), and for n > 0 `points` and `directions` hold 3n floats
+        // each and `pdf` n writable floats apart from both; the helpers take
+        // nothing for n = 0 and otherwise reject NULL, misaligned and overflowing
+        // arrays.
+        let (light, points, dirs, out) = unsafe {
+            (
+                deref(light, F, "light")?,
+                slice::<f32, 3>(points, n, F, "points")?,
+                slice::<f32, 3>(directions, n, F, "directions")?,
+                slice_mut::<f32, 1>(pdf, n, F, "pdf")?,
+            )
+        };
+        light
+            .light
+            .pdf_batch(as_vec3(points), as_vec3(dirs), out.as_flattened_mut());
         Ok(())
     })
 }

@@ -1,15 +1,14 @@
 //! Product sampling at shading points: directions drawn in proportion to the
-//! light's radiance times a factor of the surface (DESIGN.md §6a).
+//! light's radiance times a factor of the surface (docs/design.md §6a).
 
 use std::sync::Arc;
 
 use envlight::{Factor, ProductOptions, ProductSampler};
 use rayon::prelude::*;
 
-use crate::{
-    as_vec3, deref, deref_mut, draw_batch, drop_non_finite, envlight_light, envlight_sample,
-    envlight_status, finite_u, put, read, run, slice, slice_mut, to_c, value, vec3, CHUNK,
-};
+use crate::boundary::{cleared, deref, free, put, read, run, slice, slice_mut, value};
+use crate::sample::{as_vec3, draw_batch, drop_non_finite, finite_u, to_c, vec3, CHUNK};
+use crate::{envlight_light, envlight_sample, envlight_status};
 
 /// A product sampler over a light: its tables for every surface normal, built once
 /// (tens of milliseconds and a few bytes per texel; `envlight_product_memory_bytes`).
@@ -60,9 +59,16 @@ pub extern "C" fn envlight_product_new(
 ) -> envlight_status {
     const F: &str = "envlight_product_new";
     run(F, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = std::ptr::null_mut();
-        let light = unsafe { deref(light, F, "light") }?;
+        // SAFETY: by the C contract `out` is NULL or points to a writable
+        // `envlight_product *`, and `light` is NULL or a light from
+        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
+        // reject NULL and misaligned pointers.
+        let (out, light) = unsafe {
+            (
+                cleared(out, std::ptr::null_mut(), F, "out")?,
+                deref(light, F, "light")?,
+            )
+        };
         let product = ProductSampler::new(Arc::clone(&light.light), ProductOptions::default());
         put(out, envlight_product { product });
         Ok(())
@@ -72,7 +78,9 @@ pub extern "C" fn envlight_product_new(
 /// Frees a product sampler (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_product_free(product: *mut envlight_product) {
-    crate::free(product);
+    // SAFETY: by the C contract a non-NULL `product` came from envlight_product_new
+    // (which `put`s an `envlight_product`) and is freed once.
+    unsafe { free(product) };
 }
 
 /// Bytes of the product sampler's tables.
@@ -80,6 +88,9 @@ pub extern "C" fn envlight_product_free(product: *mut envlight_product) {
 pub extern "C" fn envlight_product_memory_bytes(product: *const envlight_product) -> u64 {
     const F: &str = "envlight_product_memory_bytes";
     value(F, 0, || {
+        // SAFETY: by the C contract `product` is NULL or a product sampler from
+        // envlight_product_new not yet freed, only read here; `deref` rejects NULL
+        // and misaligned pointers.
         let p = unsafe { deref(product, F, "product") }?;
         Ok(p.product.memory_bytes() as u64)
     })
@@ -98,11 +109,18 @@ pub extern "C" fn envlight_product_sample(
 ) -> bool {
     const F: &str = "envlight_product_sample";
     value(F, false, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = envlight_sample::default();
-        let p = unsafe { deref(product, F, "product") }?;
-        let f = unsafe { deref(factor, F, "factor") }?;
-        let u = unsafe { read(u, F, "u") }?;
+        // SAFETY: by the C contract `out` is NULL or one writable sample, `product`
+        // NULL or a product sampler not yet freed (only read), `factor` NULL or one
+        // `envlight_factor` and `u` NULL or 2 floats, `out` overlapping neither;
+        // the helpers reject NULL and misaligned pointers.
+        let (out, p, f, u) = unsafe {
+            (
+                cleared(out, envlight_sample::default(), F, "out")?,
+                deref(product, F, "product")?,
+                deref(factor, F, "factor")?,
+                read::<2>(u, F, "u")?,
+            )
+        };
         if finite_u(u) {
             *out = to_c(p.product.sample(&self::factor(f), u));
         }
@@ -120,9 +138,16 @@ pub extern "C" fn envlight_product_pdf(
 ) -> f32 {
     const F: &str = "envlight_product_pdf";
     value(F, 0.0, || {
-        let p = unsafe { deref(product, F, "product") }?;
-        let f = unsafe { deref(factor, F, "factor") }?;
-        let d = unsafe { read(direction, F, "direction") }?;
+        // SAFETY: by the C contract `product` is NULL or a product sampler not yet
+        // freed (only read), `factor` NULL or one `envlight_factor` and `direction`
+        // NULL or 3 floats; the helpers reject NULL and misaligned pointers.
+        let (p, f, d) = unsafe {
+            (
+                deref(product, F, "product")?,
+                deref(factor, F, "factor")?,
+                read::<3>(direction, F, "direction")?,
+            )
+        };
         Ok(p.product.pdf(&self::factor(f), vec3(d)))
     })
 }
@@ -139,11 +164,20 @@ pub extern "C" fn envlight_product_sample_batch(
 ) -> envlight_status {
     const F: &str = "envlight_product_sample_batch";
     run(F, || {
-        let p = &unsafe { deref(product, F, "product") }?.product;
-        let factors: &[[envlight_factor; 1]] = unsafe { slice(factors, n, F, "factors") }?;
+        // SAFETY: by the C contract `product` is NULL or a product sampler not yet
+        // freed (only read), and for n > 0 `factors` holds n factors, `u` 2n floats
+        // and `out` n writable samples apart from both; the helpers take nothing for
+        // n = 0 and otherwise reject NULL, misaligned and overflowing arrays.
+        let (p, factors, u, out) = unsafe {
+            (
+                deref(product, F, "product")?,
+                slice::<envlight_factor, 1>(factors, n, F, "factors")?,
+                slice::<f32, 2>(u, n, F, "u")?,
+                slice_mut::<envlight_sample, 1>(out, n, F, "out")?,
+            )
+        };
+        let p = &p.product;
         let factors = factors.as_flattened();
-        let u: &[[f32; 2]] = unsafe { slice(u, n, F, "u") }?;
-        let out: &mut [[envlight_sample; 1]] = unsafe { slice_mut(out, n, F, "out") }?;
         draw_batch(out.as_flattened_mut(), |range, samples| {
             let u = &u[range.clone()];
             let f: Vec<Factor> = factors[range].iter().map(factor).collect();
@@ -166,11 +200,21 @@ pub extern "C" fn envlight_product_pdf_batch(
 ) -> envlight_status {
     const F: &str = "envlight_product_pdf_batch";
     run(F, || {
-        let p = &unsafe { deref(product, F, "product") }?.product;
-        let factors: &[[envlight_factor; 1]] = unsafe { slice(factors, n, F, "factors") }?;
+        // SAFETY: by the C contract `product` is NULL or a product sampler not yet
+        // freed (only read), and for n > 0 `factors` holds n factors, `directions`
+        // 3n floats and `pdf` n writable floats apart from both; the helpers take
+        // nothing for n = 0 and otherwise reject NULL, misaligned and overflowing
+        // arrays.
+        let (p, factors, dirs, out) = unsafe {
+            (
+                deref(product, F, "product")?,
+                slice::<envlight_factor, 1>(factors, n, F, "factors")?,
+                slice::<f32, 3>(directions, n, F, "directions")?,
+                slice_mut::<f32, 1>(pdf, n, F, "pdf")?,
+            )
+        };
+        let p = &p.product;
         let factors = factors.as_flattened();
-        let dirs: &[[f32; 3]] = unsafe { slice(directions, n, F, "directions") }?;
-        let out: &mut [[f32; 1]] = unsafe { slice_mut(pdf, n, F, "pdf") }?;
         out.as_flattened_mut()
             .par_chunks_mut(CHUNK)
             .zip(factors.par_chunks(CHUNK))

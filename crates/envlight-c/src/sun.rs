@@ -1,11 +1,10 @@
 //! Sun extraction: the map's brightest compact source as a uniform disc, and the
-//! map without it (DESIGN.md §6d).
+//! map without it (docs/design.md §6d).
 
 use envlight::{SunExtraction, SunOptions};
 
-use crate::{
-    deref, deref_mut, envlight_light, envlight_status, put, run, slice_mut, value, Failure,
-};
+use crate::boundary::{cleared, deref, deref_mut, free, put, run, slice_mut, value, Failure};
+use crate::{envlight_light, envlight_status};
 
 /// What `envlight_light_extract_sun` found. Opaque and immutable; free it with
 /// `envlight_sun_extraction_free`.
@@ -50,9 +49,16 @@ pub extern "C" fn envlight_light_extract_sun(
 ) -> envlight_status {
     const F: &str = "envlight_light_extract_sun";
     run(F, || {
-        let out = unsafe { deref_mut(out, F, "out") }?;
-        *out = std::ptr::null_mut();
-        let light = unsafe { deref(light, F, "light") }?;
+        // SAFETY: by the C contract `out` is NULL or points to a writable
+        // `envlight_sun_extraction *`, and `light` is NULL or a light from
+        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
+        // reject NULL and misaligned pointers.
+        let (out, light) = unsafe {
+            (
+                cleared(out, std::ptr::null_mut(), F, "out")?,
+                deref(light, F, "light")?,
+            )
+        };
         let extraction = light.light.extract_sun(&SunOptions::default());
         put(out, envlight_sun_extraction { extraction });
         Ok(())
@@ -62,7 +68,10 @@ pub extern "C" fn envlight_light_extract_sun(
 /// Frees a sun extraction (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_sun_extraction_free(extraction: *mut envlight_sun_extraction) {
-    crate::free(extraction);
+    // SAFETY: by the C contract a non-NULL `extraction` came from
+    // envlight_light_extract_sun (which `put`s an `envlight_sun_extraction`) and is
+    // freed once.
+    unsafe { free(extraction) };
 }
 
 /// Writes the sun to `*sun` and returns true; false (and `*sun` zeroed) when the
@@ -74,9 +83,15 @@ pub extern "C" fn envlight_sun_extraction_sun(
 ) -> bool {
     const F: &str = "envlight_sun_extraction_sun";
     value(F, false, || {
-        let out = unsafe { deref_mut(sun, F, "sun") }?;
-        *out = envlight_sun::default();
-        let e = unsafe { deref(extraction, F, "extraction") }?;
+        // SAFETY: by the C contract `sun` is NULL or one writable `envlight_sun`,
+        // and `extraction` NULL or a handle from envlight_light_extract_sun not yet
+        // freed (only read); the helpers reject NULL and misaligned pointers.
+        let (out, e) = unsafe {
+            (
+                cleared(sun, envlight_sun::default(), F, "sun")?,
+                deref(extraction, F, "extraction")?,
+            )
+        };
         let Some(s) = e.extraction.sun else {
             return Ok(false);
         };
@@ -106,9 +121,20 @@ pub extern "C" fn envlight_sun_extraction_residual_size(
 ) -> u64 {
     const F: &str = "envlight_sun_extraction_residual_size";
     value(F, 0, || {
-        let e = unsafe { deref(extraction, F, "extraction") }?;
+        // SAFETY: by the C contract `extraction` is NULL or a handle from
+        // envlight_light_extract_sun not yet freed (only read), and `width` and
+        // `height` are NULL or one writable `uint32_t` each, distinct; the helpers
+        // reject NULL and misaligned pointers. `width` is written before `height` is
+        // checked, as the API always has.
+        let (e, width) = unsafe {
+            (
+                deref(extraction, F, "extraction")?,
+                deref_mut(width, F, "width")?,
+            )
+        };
         let r = &e.extraction.residual;
-        *unsafe { deref_mut(width, F, "width") }? = r.width() as u32;
+        *width = r.width() as u32;
+        // SAFETY: as for `width` above: NULL or one writable `uint32_t` of its own.
         *unsafe { deref_mut(height, F, "height") }? = r.height() as u32;
         Ok(e.extraction.inpainted_texels as u64)
     })
@@ -127,6 +153,9 @@ pub extern "C" fn envlight_sun_extraction_residual(
 ) -> envlight_status {
     const F: &str = "envlight_sun_extraction_residual";
     run(F, || {
+        // SAFETY: by the C contract `extraction` is NULL or a handle from
+        // envlight_light_extract_sun not yet freed, only read here; `deref` rejects
+        // NULL and misaligned pointers.
         let e = unsafe { deref(extraction, F, "extraction") }?;
         let texels = e.extraction.residual.texels();
         if len < 3 * texels.len() {
@@ -140,7 +169,11 @@ pub extern "C" fn envlight_sun_extraction_residual(
                 ),
             ));
         }
-        let out: &mut [[f32; 3]] = unsafe { slice_mut(rgb, texels.len(), F, "rgb") }?;
+        // SAFETY: by the C contract `rgb` is NULL or holds `len` writable floats of
+        // the caller's, and `len >= 3 · texels.len()` was checked just above, so the
+        // `texels.len()` triples are within them; `slice_mut` rejects NULL,
+        // misaligned and overflowing arrays.
+        let out = unsafe { slice_mut::<f32, 3>(rgb, texels.len(), F, "rgb") }?;
         out.copy_from_slice(texels);
         Ok(())
     })

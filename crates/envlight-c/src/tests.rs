@@ -2,6 +2,11 @@
 //! every error path a status and a message.
 
 use super::*;
+use crate::options::light_options;
+use crate::sample::{to_c, vec3};
+use envlight::light::{Density, Mapping, Sampler};
+use envlight::{EnvImage, EnvironmentLight};
+use std::ffi::{c_char, CStr};
 use std::ptr::{null, null_mut};
 
 /// A small sun-and-sky map.
@@ -15,6 +20,8 @@ fn last_error() -> String {
     let n = envlight_last_error(null_mut(), 0);
     let mut buf = vec![0 as c_char; n + 1];
     assert_eq!(envlight_last_error(buf.as_mut_ptr(), buf.len()), n);
+    // SAFETY: `buf` is zero-filled, and envlight_last_error wrote at most
+    // `buf.len() - 1` bytes into it, so a NUL ends the string within `buf`.
     unsafe { CStr::from_ptr(buf.as_ptr()) }
         .to_string_lossy()
         .into_owned()
@@ -142,6 +149,7 @@ fn enum_codes_follow_the_library_lists() {
     let version =
         format!("{ENVLIGHT_VERSION_MAJOR}.{ENVLIGHT_VERSION_MINOR}.{ENVLIGHT_VERSION_PATCH}");
     assert_eq!(version, env!("CARGO_PKG_VERSION"));
+    // SAFETY: envlight_version returns a NUL-terminated string in static storage.
     let c = unsafe { CStr::from_ptr(envlight_version()) };
     assert_eq!(c.to_str().unwrap(), version);
 }
@@ -315,6 +323,8 @@ fn odd_inputs_give_no_nan() {
 #[test]
 fn product_portal_sun_and_gpu_tables_equal_the_library() {
     let light = build(&envlight_light_options_default());
+    // SAFETY: `build` returned a light from envlight_light_from_rgb (asserted OK,
+    // so non-NULL), and it is read here before envlight_light_free below.
     let rust = unsafe { &*light }.light.clone();
     // Product.
     let mut product = null_mut();
