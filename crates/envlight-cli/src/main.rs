@@ -40,6 +40,7 @@ mod device;
 mod light_args;
 mod output;
 mod progress;
+mod query;
 mod shading;
 
 /// Importance-sampled HDR environment lighting: inspect a map, draw directions with

@@ -12,11 +12,10 @@ use rayon::prelude::*;
 
 use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
-use crate::device::DeviceArgs;
-use crate::light_args::{LightArgs, PortalArgs};
 use crate::output::{open_input, write_bytes, Output};
 use crate::progress::Progress;
-use crate::shading::{product_sampler, Density, NormalArgs};
+use crate::query::{Query, QueryArgs};
+use crate::shading::Density;
 
 /// Lines read before a batch is processed.
 const BATCH_LINES: usize = 1 << 16;
@@ -43,16 +42,7 @@ command with an error naming its line; with -o no output file is left behind. Wi
 ))]
 pub struct Args {
     #[command(flatten)]
-    light: LightArgs,
-
-    #[command(flatten)]
-    normal: NormalArgs,
-
-    #[command(flatten)]
-    portal: PortalArgs,
-
-    #[command(flatten)]
-    device: DeviceArgs,
+    query: QueryArgs,
 
     /// CSV file of directions, or - for stdin.
     #[arg(long, value_name = "FILE|-")]
@@ -65,8 +55,7 @@ pub struct Args {
 
 /// Runs `envlight eval`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
-    let (normal, gpu) = (args.normal.normal.is_some(), args.device.is_gpu());
-    args.portal.requested(normal, gpu)?;
+    args.query.check()?;
     let (mut input, source): (Box<dyn BufRead>, String) = if args.dirs.as_os_str() == "-" {
         (Box::new(std::io::stdin().lock()), "<stdin>".to_string())
     } else {
@@ -84,17 +73,19 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     }
     let columns = Columns::from_header(&line, &source)?;
 
-    let loaded = args.light.load()?;
+    let Query {
+        loaded,
+        product,
+        portals,
+        gpu,
+    } = args.query.open()?;
     let light = &loaded.light;
-    let product = product_sampler(light, args.normal.normal);
-    let density = Density::new(light, product.as_ref(), args.normal.normal);
-    let portals = args.portal.build(light, normal, gpu)?;
+    let density = Density::new(light, product.as_ref(), args.query.normal());
     let portal_point = portals.as_ref().map(|(pl, at)| pl.at(*at));
     let pdf = |d: Vec3| match &portal_point {
         Some(point) => point.pdf(d),
         None => density.pdf(d),
     };
-    let gpu = args.device.open(light, args.normal.normal)?;
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 

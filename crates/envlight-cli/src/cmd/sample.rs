@@ -10,11 +10,10 @@ use rayon::prelude::*;
 
 use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
-use crate::device::DeviceArgs;
-use crate::light_args::{warn, LightArgs, PortalArgs};
+use crate::light_args::warn;
 use crate::output::{write_bytes, Output};
 use crate::progress::Progress;
-use crate::shading::{product_sampler, NormalArgs};
+use crate::query::{Query, QueryArgs};
 
 /// Rows formatted by one task.
 const CHUNK_ROWS: u64 = 8192;
@@ -64,16 +63,7 @@ pdf 0.\n\n",
 ))]
 pub struct Args {
     #[command(flatten)]
-    light: LightArgs,
-
-    #[command(flatten)]
-    normal: NormalArgs,
-
-    #[command(flatten)]
-    portal: PortalArgs,
-
-    #[command(flatten)]
-    device: DeviceArgs,
+    query: QueryArgs,
 
     /// Number of directions to draw.
     #[arg(short = 'n', value_name = "N")]
@@ -90,21 +80,22 @@ pub struct Args {
 
 /// Runs `envlight sample`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
-    let (normal, gpu) = (args.normal.normal.is_some(), args.device.is_gpu());
-    args.portal.requested(normal, gpu)?;
-    let loaded = args.light.load()?;
+    args.query.check()?;
+    let Query {
+        loaded,
+        product,
+        portals,
+        gpu,
+    } = args.query.open()?;
     let light = &loaded.light;
-    let product = product_sampler(light, args.normal.normal);
-    let portals = args.portal.build(light, normal, gpu)?;
     let density = match &portals {
         Some((pl, at)) => Density::Portal(Box::new(pl.at(*at))),
         None => Density::Shading(crate::shading::Density::new(
             light,
             product.as_ref(),
-            args.normal.normal,
+            args.query.normal(),
         )),
     };
-    let gpu = args.device.open(light, args.normal.normal)?;
     let mut out = Output::create(args.output.as_deref())?;
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 
@@ -122,7 +113,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
              not a parallelogram); written with pdf 0 and radiance 0",
             loaded.name, args.count
         ));
-    } else if failed > 0 && !loaded.black && args.normal.normal.is_some() {
+    } else if failed > 0 && !loaded.black && args.query.normal().is_some() {
         warn(&format!(
             "{}: {failed} of {} sample points gave no direction (a pole, or no light \
              above the surface); written with pdf 0 and radiance 0",

@@ -12,11 +12,9 @@ use envlight_verify::{
 };
 
 use super::Outcome;
-use crate::device::DeviceArgs;
-use crate::light_args::{LightArgs, PortalArgs};
 use crate::output::Output;
 use crate::progress::Progress;
-use crate::shading::{product_sampler, NormalArgs};
+use crate::query::{Query, QueryArgs};
 
 /// Arguments of `envlight verify`.
 #[derive(Debug, clap::Args)]
@@ -61,16 +59,7 @@ sees nothing lit through its portals: the checks are skipped.\n\n",
 ))]
 pub struct Args {
     #[command(flatten)]
-    light: LightArgs,
-
-    #[command(flatten)]
-    normal: NormalArgs,
-
-    #[command(flatten)]
-    portal: PortalArgs,
-
-    #[command(flatten)]
-    device: DeviceArgs,
+    query: QueryArgs,
 
     /// Number of sample directions (for each sampling check).
     #[arg(long, value_name = "N", default_value_t = 200_000,
@@ -88,23 +77,24 @@ const PDF_TOLERANCE: f64 = 1e-3;
 
 /// Runs `envlight verify`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
-    let (normal, gpu) = (args.normal.normal.is_some(), args.device.is_gpu());
-    args.portal.requested(normal, gpu)?;
-    let loaded = args.light.load()?;
+    args.query.check()?;
+    let Query {
+        loaded,
+        product,
+        portals,
+        gpu,
+    } = args.query.open()?;
     let light = &loaded.light;
     let n = args.samples as usize;
-    let portals = args.portal.build(light, normal, gpu)?;
     let at_portals = portals.as_ref().map(|(pl, at)| AtPortalPoint::new(pl, *at));
     let unseen = at_portals.as_ref().is_some_and(|a| a.power() <= 0.0);
-    let gpu = args.device.open(light, args.normal.normal)?;
     let on_gpu = gpu
         .as_ref()
         .zip(SphereSampler::grid(light.as_ref()))
         .map(|(g, grid)| envlight_gpu::GpuSphereSampler::new(g, grid));
-    let product = product_sampler(light, args.normal.normal);
     let at = product
         .as_ref()
-        .zip(args.normal.normal)
+        .zip(args.query.normal())
         .map(|(p, normal)| AtShadingPoint::new(p, Factor::cosine(normal)));
     let unlit = at.as_ref().is_some_and(|a| !a.samples_anything());
     let skipped = |why: &str| -> Vec<Row> {
