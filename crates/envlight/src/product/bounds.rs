@@ -1,18 +1,11 @@
 //! Regions of directions and upper bounds of `v·ω` over them: cones, and the
-//! exact (θ, φ) boxes of a lat-long light's texel rectangles.
+//! exact (θ, φ) boxes of a lat-long light's texel rectangles; how a patch's
+//! weight is floored by such a bound ([`PatchBound`]); and the f64 vector
+//! helpers the module's geometry shares.
 
+use super::tuning::{BOUNDARY_STEPS, BOUND_SHARE, BOX_SLACK, CONE_SLACK, MEAN_GRID};
 use crate::light::{EnvironmentLight, Mapping};
 use std::f64::consts::PI;
-
-/// Boundary samples per patch edge when bounding its cone.
-pub(super) const BOUNDARY_STEPS: usize = 64;
-
-/// Midpoints per side of the grid that estimates a patch's mean direction.
-const MEAN_GRID: usize = 16;
-
-/// Radians added to every cone's half-angle for the rounding of the f32 mapping
-/// (about 1e-6 rad) and of the rotation into the light frame (about 1e-7 rad).
-pub(super) const CONE_SLACK: f64 = 1e-4;
 
 /// An upper bound of the arc length on the sphere per unit length in `(u, v)` of
 /// the equal-area mapping, `2 √(8 + π²/2) ≈ 7.193`, rounded up.
@@ -60,14 +53,14 @@ impl Cone {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct LatLongBox {
     /// `(cos φ0, sin φ0)` and `(cos φ1, sin φ1)`.
-    edge0: [f64; 2],
-    edge1: [f64; 2],
+    pub edge0: [f64; 2],
+    pub edge1: [f64; 2],
     /// `φ1 - φ0 < π`, where the test of which side of the edges a direction lies
     /// on decides whether its azimuth is inside.
-    narrow: bool,
+    pub narrow: bool,
     /// `(sin θ0, cos θ0)` and `(sin θ1, cos θ1)`.
-    top: (f64, f64),
-    bottom: (f64, f64),
+    pub top: (f64, f64),
+    pub bottom: (f64, f64),
 }
 
 impl LatLongBox {
@@ -91,17 +84,6 @@ impl LatLongBox {
     /// edges'; then `a sin θ + v_z cos θ = R cos(θ - θ*)` with `R = √(a² + v_z²)`
     /// peaks at `θ* = atan2(a, v_z)` when that is inside `[θ0, θ1]` (the two side
     /// tests below), else at the nearer end, one of the two ends.
-    /// The box as exported (see `ProductTables::bright`).
-    pub fn exported(&self) -> super::export::LatLongPatch {
-        super::export::LatLongPatch {
-            edge0: self.edge0,
-            edge1: self.edge1,
-            narrow: self.narrow,
-            top: [self.top.0, self.top.1],
-            bottom: [self.bottom.0, self.bottom.1],
-        }
-    }
-
     #[inline(always)]
     fn max_dot(&self, v: [f64; 3], rho: f64) -> f64 {
         // Every candidate is computed and the right one selected, without
@@ -125,10 +107,6 @@ impl LatLongBox {
         }
     }
 }
-
-/// Added to [`LatLongBox::max_dot`] for the rounding of f32 directions and of the
-/// rotation into the light frame (about 1e-7 each).
-pub(super) const BOX_SLACK: f64 = 1e-5;
 
 /// The directions of a patch's lit cells, bounded: a cone, and on a lat-long
 /// light the exact (θ, φ) box of the cells' rectangle.
@@ -173,6 +151,48 @@ impl Direction {
             v,
             rho: (v[0] * v[0] + v[1] * v[1]).sqrt(),
         }
+    }
+}
+
+/// How [`ProductSampler`](super::ProductSampler) weights a patch.
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PatchBound {
+    /// Floored by a share of the upper bound of the factor over the patch and the
+    /// node's neighbourhood: unbiased.
+    #[default]
+    Cone,
+    /// The factor at the patch's centre for the node's own direction only:
+    /// **biased** (a patch beyond the node's horizon gets weight 0 while a
+    /// neighbouring normal sees it lit). It exists so that tests can show that the
+    /// invariant checks catch it.
+    AxisOnly,
+}
+
+impl PatchBound {
+    /// The floor rule of a patch's weight, for the tables' patches and the bright
+    /// ones alike: from the factor's `value` at the patch's centre of light and
+    /// its `upper` bound over the patch (and, for a table, the node's
+    /// neighbourhood), both `≥ 0`, `max(value, scale · BOUND_SHARE · upper)`
+    /// where the bound is positive and 0 where it is not (the patch is wholly
+    /// past the horizon); the broken [`PatchBound::AxisOnly`] keeps `value`.
+    /// `scale ≤ 1` shrinks the share (a table's floor budget; 1 for a bright
+    /// patch).
+    #[inline(always)]
+    pub(super) fn weight(self, value: f64, upper: f64, scale: f64) -> f64 {
+        match self {
+            PatchBound::Cone if upper > 0.0 => value.max(scale * BOUND_SHARE * upper),
+            PatchBound::Cone => 0.0,
+            PatchBound::AxisOnly => value,
+        }
+    }
+
+    /// Whether [`Self::weight`] is `value` itself for every `upper` at most
+    /// `1.001`, the most a cosine's bound reaches with its slack: then the bound
+    /// need not be computed.
+    #[inline(always)]
+    pub(super) fn keeps_cosine(self, value: f64) -> bool {
+        value >= BOUND_SHARE * 1.001 && self == PatchBound::Cone
     }
 }
 

@@ -14,32 +14,22 @@
 //! these patches no weight; a shading point mixes the tables' component, weighted
 //! by the sum of the mixed tables' weights, with the bright patches' weights.
 
-use super::bounds::{dot, Direction, Region};
+use super::bounds::{dot, Direction, PatchBound, Region};
 use super::factor::lobe_proxy;
 use super::fine::Fine;
-use super::tables::BOUND_SHARE;
-use super::PatchBound;
-
-/// At most this many patches are bright: the cost of a new shading point grows
-/// with them (one bound and one dot product each).
-pub(super) const MAX_BRIGHT: usize = 16;
-
-/// A patch is bright when it holds at least this share of the light's density.
-pub(super) const BRIGHT_SHARE: f64 = 0.01;
-
-/// ... and lies within a cone of at most this half-angle (radians, 10°): the
-/// factor at a patch's centre of light stands for it only when the patch is
-/// small (the default patches are about 4° across from centre to corner). On
-/// coarse patch grids the tables, which mix four nodes' views, serve better.
-pub(super) const BRIGHT_MAX_HALF_ANGLE: f64 = 0.1745;
+use super::tuning::{BRIGHT_MAX_HALF_ANGLE, BRIGHT_SHARE, MAX_BRIGHT};
 
 /// One bright patch, with what its weight needs, stored together.
 #[derive(Debug, Clone, Copy)]
-struct Item {
-    patch: u32,
-    power: f64,
-    region: Region,
-    centre: [f64; 3],
+pub(super) struct Item {
+    /// Its patch index.
+    pub patch: u32,
+    /// Its share of the light's power.
+    pub power: f64,
+    /// Its directions, bounded.
+    pub region: Region,
+    /// Its centre of light, a unit light-frame direction.
+    pub centre: [f64; 3],
 }
 
 /// The bright patches of a fine level (see the module docs).
@@ -142,7 +132,7 @@ impl Bright {
                 // cosine at the centre is below its share of it.
                 Target::Cosine { normal } => {
                     let value = dot(normal.v, item.centre);
-                    if value >= BOUND_SHARE * 1.001 && bound == PatchBound::Cone {
+                    if bound.keeps_cosine(value) {
                         *o = item.power * value;
                         total += *o;
                         continue;
@@ -162,12 +152,7 @@ impl Bright {
                     )
                 }
             };
-            let g = match bound {
-                PatchBound::Cone if upper > 0.0 => value.max(BOUND_SHARE * upper),
-                PatchBound::Cone => 0.0,
-                PatchBound::AxisOnly => value,
-            };
-            *o = item.power * g;
+            *o = item.power * bound.weight(value, upper, 1.0);
             total += *o;
         }
         total
@@ -190,34 +175,12 @@ impl Bright {
         lowest
     }
 
+    /// The bright patches, brightest first.
+    pub fn items(&self) -> &[Item] {
+        &self.items
+    }
+
     /// Bytes held.
-    /// The bright patches as exported (see `ProductTables::bright`).
-    pub fn exported(&self) -> Vec<super::export::BrightPatch> {
-        self.items
-            .iter()
-            .map(|item| super::export::BrightPatch {
-                patch: item.patch,
-                power: item.power,
-                centre: item.centre,
-                cone: (
-                    item.region.cone.axis,
-                    item.region.cone.cos_half,
-                    item.region.cone.sin_half,
-                ),
-                latlong: item.region.latlong.map(|b| b.exported()),
-            })
-            .collect()
-    }
-
-    /// Per patch, its index among the bright ones (at most 16 of them) or 255.
-    pub fn of_patch_u8(&self) -> Vec<u8> {
-        assert!(self.items.len() <= MAX_BRIGHT, "the default bright patches");
-        self.of_patch
-            .iter()
-            .map(|&b| if b == Self::NONE { u8::MAX } else { b as u8 })
-            .collect()
-    }
-
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Item>() * self.items.len() + 2 * self.of_patch.len()
     }

@@ -2,11 +2,12 @@
 //! sampling and pdf to other languages (the Dr.Jit port in envlight's Python
 //! package; layout in docs/gpu-tables.md, "Product tables").
 //!
+//! These are plain data, filled in one go by
+//! [`ProductSampler::cosine_tables`](super::ProductSampler::cosine_tables) from
+//! the fine level, the cosine's tables and the bright patches; nothing here reads
+//! the rest of the module.
+//!
 //! [`ShadingPoint`]: super::ShadingPoint
-
-use super::bright::Bright;
-use super::fine::Fine;
-use super::tables::Tables;
 
 /// A bright patch of a [`ProductTables`]: weighted at every shading point by the
 /// cosine at its centre of light, floored by a share of the cosine's upper bound
@@ -99,36 +100,4 @@ pub struct ProductTables {
     pub horizon_band: f32,
     /// [`super::MIN_HORIZON_BAND`], the least `s`.
     pub min_horizon_band: f32,
-}
-
-impl Fine {
-    pub(super) fn export_into(&self, out: &mut ProductTables) {
-        let ([w, h], cells) = self.export_cells(out);
-        out.image = [w as u32, h as u32];
-        out.cells = cells.map(|c| c as u32);
-        out.patches = self.patches.map(|p| p as u32);
-        out.col_patch = self.col_patch.clone();
-        out.row_patch = self.row_patch.clone();
-        out.cell_widths = self.widths.clone();
-        out.cell_slots = self.slots.iter().map(|s| [s.threshold, s.alias]).collect();
-        out.spans = self.span_words();
-    }
-}
-
-impl Tables {
-    pub(super) fn export_into(&self, out: &mut ProductTables) {
-        let (n, slots, widths, empty, totals) = self.parts();
-        out.grid = n as u32;
-        out.table_slots = slots.iter().map(|s| [s.threshold, s.alias]).collect();
-        out.table_widths = widths.to_vec();
-        out.node_empty = empty.to_vec();
-        out.node_totals = totals.to_vec();
-    }
-}
-
-impl Bright {
-    pub(super) fn export_into(&self, out: &mut ProductTables) {
-        out.bright = self.exported();
-        out.bright_of_patch = self.of_patch_u8();
-    }
 }

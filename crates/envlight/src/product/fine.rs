@@ -65,7 +65,7 @@ struct Span {
 pub(super) struct Fine {
     cells: Cells,
     /// The image's `[w, h]`.
-    size: [usize; 2],
+    pub(super) size: [usize; 2],
     /// `[Pw, Ph]`.
     pub patches: [usize; 2],
     /// First cell column of each patch column, `Pw + 1` entries.
@@ -243,28 +243,17 @@ impl Fine {
         fine
     }
 
-    /// The smallest cell rectangle `[x0, x1, y0, y1]` (ends exclusive) holding
-    /// patch `k`'s lit cells, those of non-zero width: `None` if there is none.
-    /// The image's size and the cell grid's, with the density and (for the
-    /// bilinear density) the nodes written to `out`.
-    pub(super) fn export_cells(
-        &self,
-        out: &mut super::export::ProductTables,
-    ) -> ([usize; 2], [usize; 2]) {
+    /// The bilinear density's node values and positions `(values, u_nodes,
+    /// v_nodes)` (see [`Cells::Bilinear`]), `None` for texels.
+    pub(super) fn nodes(&self) -> Option<(&[f32], &[f64], &[f64])> {
         match &self.cells {
-            Cells::Texels => out.density = Density::PiecewiseConstant,
+            Cells::Texels => None,
             Cells::Bilinear {
                 values,
                 u_nodes,
                 v_nodes,
-            } => {
-                out.density = Density::PiecewiseBilinear;
-                out.node_values = values.clone();
-                out.u_nodes = u_nodes.clone();
-                out.v_nodes = v_nodes.clone();
-            }
+            } => Some((values, u_nodes, v_nodes)),
         }
-        (self.size, [self.col_patch.len(), self.row_patch.len()])
     }
 
     /// Per patch `[x0, y0, cols, rows, first]` (see `ProductTables::spans`).
@@ -275,6 +264,8 @@ impl Fine {
             .collect()
     }
 
+    /// The smallest cell rectangle `[x0, x1, y0, y1]` (ends exclusive) holding
+    /// patch `k`'s lit cells, those of non-zero width: `None` if there is none.
     fn lit_cells(&self, k: usize) -> Option<[usize; 4]> {
         let mut rect: Option<[usize; 4]> = None;
         for (i, j, _) in self.lit(k) {

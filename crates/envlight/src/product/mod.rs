@@ -17,7 +17,7 @@
 //!   `P_k · max(cos⁺(a·c_k), s · B_k)`, `c_k` the patch's centre direction and `B_k`
 //!   an *upper bound* of `cos⁺(n·ω)` over the patch's directions and over every
 //!   normal `n` in the grid cells around `a` (exact over a lat-long light's (θ, φ)
-//!   boxes, over cones otherwise), `s` a fixed share (`tables::BOUND_SHARE`).
+//!   boxes, over cones otherwise), `s` a fixed share (`tuning::BOUND_SHARE`).
 //!   Glossy factors use tables over mirror directions for a few roughnesses, the
 //!   GGX proxy in place of the cosine; rough lobes use the cosine's tables.
 //!
@@ -72,20 +72,25 @@ mod pick;
 mod tables;
 #[cfg(test)]
 mod tests;
+mod tuning;
 
+pub use bounds::PatchBound;
 pub use export::{BrightPatch, LatLongPatch, ProductTables};
 pub use factor::Factor;
+pub use tuning::{HORIZON_BAND, MIN_HORIZON_BAND};
 
 use crate::distribution::CDF_ONE;
 use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
 use crate::math::{is_positive_finite, Vec3};
 use bounds::Direction;
-use bright::{Bright, Target, MAX_BRIGHT};
+use bright::{Bright, Target};
 use factor::reflect;
 use fine::Fine;
+use pick::BELOW_ONE;
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 use tables::{Lobe, Mix, Tables};
+use tuning::{COSINE_FROM_ROUGHNESS, LOBE_GRID_SCALE, LOBE_ROUGHNESS, MAX_BRIGHT, TILT_GAIN};
 
 /// How a [`ProductSampler`] is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -131,21 +136,6 @@ pub struct ProductOptions {
     pub glossy_without_tilt: bool,
 }
 
-/// How [`ProductSampler`] weights a patch.
-#[doc(hidden)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PatchBound {
-    /// Floored by a share of the upper bound of the factor over the patch and the
-    /// node's neighbourhood: unbiased.
-    #[default]
-    Cone,
-    /// The factor at the patch's centre for the node's own direction only:
-    /// **biased** (a patch beyond the node's horizon gets weight 0 while a
-    /// neighbouring normal sees it lit). It exists so that tests can show that the
-    /// invariant checks catch it.
-    AxisOnly,
-}
-
 impl ProductOptions {
     /// The default of [`ProductOptions::normal_grid`].
     pub const DEFAULT_NORMAL_GRID: usize = 16;
@@ -168,49 +158,12 @@ impl ProductOptions {
     }
 }
 
-/// The GGX roughnesses with tables of their own: a glossy factor uses the nearest
-/// (in log scale), or the cosine's tables from [`COSINE_FROM_ROUGHNESS`] up.
-const LOBE_ROUGHNESS: [f32; 3] = [0.08, 0.16, 0.32];
-
-/// The lobe grid of each of [`LOBE_ROUGHNESS`], in halves of
-/// [`ProductOptions::lobe_grid`]: narrower lobes need finer grids, as a shading
-/// point mixes tables about its four neighbouring nodes (16, 12 and 12 cells a side
-/// by default; nodes about 13°, 17° and 17° apart). The widest lobe lost 0.03–0.05
-/// of its efficiency on a constant map at 8 cells (nodes 25° apart).
-const LOBE_GRID_SCALE: [usize; 3] = [4, 3, 3];
-
-/// Glossy factors this rough or rougher sample from the cosine's tables: their
-/// lobe is wide enough that the cosine is the better part of the product.
-const COSINE_FROM_ROUGHNESS: f32 = 0.45;
-
 /// Half the spacing of f32 values just below 1.
 const XI_HALF_QUANTUM: f64 = f32::EPSILON as f64 / 4.0;
 
 /// The least probability of a shading point's component (the tables, or a bright
 /// patch) with weight: one unit of a fixed-point CDF.
 const MIN_SHARE: f64 = 1.0 / CDF_ONE as f64;
-
-/// The largest f64 below 1.
-const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
-
-/// The depth of the band below a surface's horizon whose samples are reflected
-/// above it, as the cosine `n·ω` (sin 20°), at most: a draw with `-s < n·ω < 0`
-/// is returned as its mirror image `ω - 2(n·ω)n` (see [`ShadingPoint::pdf`];
-/// [`ShadingPoint::horizon_band`] gives a point's `s`). The tables mix four
-/// neighbouring normals' products and a patch is sampled by the light alone, so
-/// some draws land just below the horizon, where `L·f` is 0: up to 4.6% of them
-/// for some normals, measured over the shared maps and 64 random normals, of
-/// which at most 0.28% lie deeper than 20° (0.47% deeper than 15°, 0.71% than
-/// 10°; BENCHMARKS.md). A deeper band costs more second lookups (a direction
-/// within it above the horizon needs the mixture at its mirror image too: about
-/// `s²` of a cosine-distributed set).
-pub const HORIZON_BAND: f32 = 0.342_020_14;
-
-/// The least band a shading point keeps (sin 5°). A point narrows its band below
-/// [`HORIZON_BAND`] to the lowest bright patch (a sun) that lies wholly above its
-/// horizon within it, down to this: that patch's draws then need no second
-/// lookup (a low sun over a ground plane: most of its product samples).
-pub const MIN_HORIZON_BAND: f32 = 0.087_155_74;
 
 /// Samples directions at a shading point in proportion to (a close bound of) the
 /// light's radiance times a [`Factor`], with the exact pdf (docs/design.md §6a; the
@@ -377,35 +330,41 @@ impl ProductSampler {
     /// [`ShadingPoint::sample`] and [`ShadingPoint::pdf`] with
     /// [`Factor::Cosine`] (layout: docs/gpu-tables.md, "Product tables").
     pub fn cosine_tables(&self) -> ProductTables {
-        let mut out = ProductTables {
-            density: Density::PiecewiseConstant,
-            image: [0; 2],
-            cells: [0; 2],
-            node_values: Vec::new(),
-            u_nodes: Vec::new(),
-            v_nodes: Vec::new(),
-            patches: [0; 2],
-            col_patch: Vec::new(),
-            row_patch: Vec::new(),
-            cell_widths: Vec::new(),
-            cell_slots: Vec::new(),
-            spans: Vec::new(),
-            grid: 0,
-            table_slots: Vec::new(),
-            table_widths: Vec::new(),
-            node_empty: Vec::new(),
-            node_totals: Vec::new(),
-            bright: Vec::new(),
-            bright_of_patch: Vec::new(),
-            bound_share: tables::BOUND_SHARE,
-            box_slack: bounds::BOX_SLACK,
+        let (fine, bright) = (&self.fine, &self.bright);
+        let (grid, table_slots, table_widths, node_empty, node_totals) = self.cosine.parts();
+        let nodes = fine.nodes();
+        let [w, h] = fine.size;
+        assert!(bright.len() <= MAX_BRIGHT, "the default bright patches");
+        ProductTables {
+            density: match nodes {
+                None => Density::PiecewiseConstant,
+                Some(_) => Density::PiecewiseBilinear,
+            },
+            image: [w as u32, h as u32],
+            cells: [fine.col_patch.len() as u32, fine.row_patch.len() as u32],
+            node_values: nodes.map_or_else(Vec::new, |(values, _, _)| values.to_vec()),
+            u_nodes: nodes.map_or_else(Vec::new, |(_, u, _)| u.to_vec()),
+            v_nodes: nodes.map_or_else(Vec::new, |(_, _, v)| v.to_vec()),
+            patches: fine.patches.map(|p| p as u32),
+            col_patch: fine.col_patch.clone(),
+            row_patch: fine.row_patch.clone(),
+            cell_widths: fine.widths.clone(),
+            cell_slots: pick::words(&fine.slots),
+            spans: fine.span_words(),
+            grid: grid as u32,
+            table_slots: pick::words(table_slots),
+            table_widths: table_widths.to_vec(),
+            node_empty: node_empty.to_vec(),
+            node_totals: node_totals.to_vec(),
+            bright: bright.items().iter().map(export_bright).collect(),
+            bright_of_patch: (0..fine.power.len())
+                .map(|k| bright.index(k).map_or(u8::MAX, |b| b as u8))
+                .collect(),
+            bound_share: tuning::BOUND_SHARE,
+            box_slack: tuning::BOX_SLACK,
             horizon_band: HORIZON_BAND,
             min_horizon_band: MIN_HORIZON_BAND,
-        };
-        self.fine.export_into(&mut out);
-        self.cosine.export_into(&mut out);
-        self.bright.export_into(&mut out);
-        out
+        }
     }
 
     /// The sampling state at a shading point with factor `factor`: which tables it
@@ -529,9 +488,23 @@ impl ProductSampler {
     }
 }
 
-/// How far [`tilted_mirror`] may turn a glossy factor's lookup, per unit of
-/// roughness, in units of `tan(θo / 2)`.
-const TILT_GAIN: f32 = 1.75;
+/// A bright patch as exported ([`ProductTables::bright`]).
+fn export_bright(item: &bright::Item) -> BrightPatch {
+    let region = &item.region;
+    BrightPatch {
+        patch: item.patch,
+        power: item.power,
+        centre: item.centre,
+        cone: (region.cone.axis, region.cone.cos_half, region.cone.sin_half),
+        latlong: region.latlong.map(|b| LatLongPatch {
+            edge0: b.edge0,
+            edge1: b.edge1,
+            narrow: b.narrow,
+            top: [b.top.0, b.top.1],
+            bottom: [b.bottom.0, b.bottom.1],
+        }),
+    }
+}
 
 /// The direction a glossy factor's lobe tables are looked up at: the mirror
 /// direction `r` turned towards the normal `n` by the angle `ψ` with

@@ -24,6 +24,11 @@ pub(super) struct Slot {
     pub alias: u32,
 }
 
+/// `slots` as the exported `[threshold, alias]` pairs.
+pub(super) fn words(slots: &[Slot]) -> Vec<[u32; 2]> {
+    slots.iter().map(|s| [s.threshold, s.alias]).collect()
+}
+
 /// A table of `n` default (all-zero) values whose memory the kernel is asked to
 /// back with 2 MiB pages before it is written: the product sampler reads its
 /// big tables at random places, which with 4 KiB pages would miss the TLB.
@@ -65,7 +70,7 @@ pub(super) fn received(slots: &[Slot]) -> Vec<u128> {
 }
 
 /// The largest f64 below 1.
-const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
+pub(super) const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// Fills `slots` (as long as `widths`) with the exact alias table of the
 /// fixed-point widths `widths`, which sum to [`CDF_ONE`] or are all 0 (then every

@@ -17,11 +17,11 @@
 //! the six axis directions, 17° at the octants' centres for 16 cells a side); the
 //! neighbourhood cones follow each node's own cells.
 
-use super::bounds::{dot, norm, Direction, BOUNDARY_STEPS, CONE_SLACK};
+use super::bounds::{dot, norm, Direction, PatchBound};
 use super::factor::lobe_proxy;
 use super::fine::Fine;
 use super::pick::{self, Slot};
-use super::PatchBound;
+use super::tuning::{BOUNDARY_STEPS, BOUND_SHARE, CONE_SLACK, FLOOR_BUDGET};
 use crate::distribution::CDF_ONE;
 use crate::math::Vec3;
 use rayon::prelude::*;
@@ -35,23 +35,6 @@ pub(super) enum Lobe {
     /// The GGX proxy `D_α` about `a`, the mirror direction, with `α² = alpha2`.
     Glossy { alpha2: f64 },
 }
-
-/// How much of a patch's bound its weight keeps at least: the weight is
-/// `P · max(f(a, c), BOUND_SHARE · B)`, `c` the patch's centre of light and `B` the
-/// bound over the patch and the node's neighbourhood. 1 would weight by the bound
-/// alone, which spends samples on bright patches just past the surface's horizon
-/// (a low sun: efficiency 0.31 for a surface facing down under sunrise.exr with a
-/// share of 0.25); a small share follows the factor at the node and keeps just
-/// enough weight elsewhere for the normals between nodes. Measured over the shared
-/// maps, the five test normals and 24 random ones (BENCHMARKS.md): 0.01 and 0.03
-/// give the same worst case over random normals, 0.01 the better one at the nodes.
-pub(super) const BOUND_SHARE: f64 = 0.01;
-
-/// At most this share of what the factor gives a node's table at its own direction
-/// is added by the floors: more would spend samples below the horizon of a
-/// surface facing the node's direction (up to 6% measured for a surface facing
-/// down under night.exr with the full share).
-pub(super) const FLOOR_BUDGET: f64 = 0.01;
 
 /// One table per node of an `n × n`-cell octahedral grid of directions
 /// (`(n + 1)²` nodes, on the cells' corners), over a fine level's patches: a
@@ -259,12 +242,12 @@ impl Tables {
         self.widths[k * self.empty.len() + node as usize]
     }
 
-    /// Bytes held.
     /// `(n, slots, widths, empty, totals)`, for the export.
     pub fn parts(&self) -> (usize, &[Slot], &[u32], &[bool], &[f64]) {
         (self.n, &self.slots, &self.widths, &self.empty, &self.totals)
     }
 
+    /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Slot>() * self.slots.len()
             + 4 * self.widths.len()
@@ -350,7 +333,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
 }
 
 /// One node's weights over the patches: `P_k · max(f(centre_k), t · BOUND_SHARE · B_k)`
-/// with `B_k` the upper bound of the factor over patch `k` and over every direction
+/// (the floor rule, [`PatchBound::weight`]) with `B_k` the upper bound of the factor over patch `k` and over every direction
 /// within the cone `spread` (`(sin, cos)` of its half-angle; `None` for the whole
 /// sphere) about `axis` (just `f(centre_k)` for the broken [`PatchBound::AxisOnly`]),
 /// as f32 relative to the largest, every positive weight kept positive. Patches
@@ -405,11 +388,7 @@ fn fill_weights(
     };
     let weights: Vec<f64> = parts
         .iter()
-        .map(|&(value, upper)| match bound {
-            PatchBound::Cone if upper > 0.0 => value.max(t * BOUND_SHARE * upper),
-            PatchBound::Cone => 0.0,
-            PatchBound::AxisOnly => value,
-        })
+        .map(|&(value, upper)| bound.weight(value, upper, t))
         .collect();
     let total: f64 = weights.iter().sum();
     let max = weights.iter().fold(0.0f64, |m, &w| m.max(w));
