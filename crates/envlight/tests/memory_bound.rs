@@ -156,12 +156,11 @@ fn ints(values: &[i32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
-/// A single-part OpenEXR file of half RGB: its header (`tile` makes it tiled),
+/// A single-part OpenEXR file of half RGB, `width` × `height`: its header (`tile` makes it tiled),
 /// an offset table of `chunk_count` entries all pointing at one chunk, and that
 /// chunk: `leader` (block coordinates), a declared byte count and `payload`.
 fn exr_file(
-    width: i32,
-    height: i32,
+    (width, height): (i32, i32),
     compression: u8,
     tile: Option<u32>,
     chunk_count: usize,
@@ -271,21 +270,20 @@ fn hostile() -> Vec<(String, Vec<u8>)> {
     vec![
         (
             "EXR, a 2^27-texel ZIP scanline from 100 bytes".into(),
-            exr_file(1 << 27, 1, zip, None, 1, &[0], 100, &garbage),
+            exr_file((1 << 27, 1), zip, None, 1, &[0], 100, &garbage),
         ),
         (
             "EXR, 16384x16384 uncompressed, every chunk one 10-byte block".into(),
-            exr_file(16384, 16384, 0, None, 16384, &[0], 10, &garbage[..10]),
+            exr_file((16384, 16384), 0, None, 16384, &[0], 10, &garbage[..10]),
         ),
         (
             "EXR, an offset table of 2^28 chunks in a few hundred bytes".into(),
-            exr_file(1, 1 << 28, 0, None, 4, &[0], 6, &garbage[..6]),
+            exr_file((1, 1 << 28), 0, None, 4, &[0], 6, &garbage[..6]),
         ),
         (
             "EXR, one 8192x8192 ZIP tile from 60 bytes".into(),
             exr_file(
-                8192,
-                8192,
+                (8192, 8192),
                 zip,
                 Some(8192),
                 1,
@@ -296,7 +294,7 @@ fn hostile() -> Vec<(String, Vec<u8>)> {
         ),
         (
             "EXR, a chunk declaring 2^31 - 1 bytes".into(),
-            exr_file(64, 64, zip, None, 4, &[0], i32::MAX, &garbage),
+            exr_file((64, 64), zip, None, 4, &[0], i32::MAX, &garbage),
         ),
         (
             "HDR, 200M-texel scanline from 64 bytes".into(),
