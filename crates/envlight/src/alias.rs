@@ -255,7 +255,7 @@ impl AliasTable2D {
         // library call on the x86-64 baseline.
         let coarse = scaled_leftover as u32 as f64;
         let du = coarse / split;
-        let dv = (scaled_leftover - coarse).min(1.0 - f64::EPSILON / 2.0);
+        let dv = (scaled_leftover - coarse).min(crate::math::BELOW_ONE);
         // 32-bit division (the table has at most u32::MAX cells) is the cheaper one.
         let (iv, iu) = (
             (index as u32 / self.nu as u32) as usize,

@@ -42,11 +42,8 @@ use crate::distribution::{
     ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
-use crate::math::prefetch_ptr;
+use crate::math::{prefetch_ptr, BELOW_ONE};
 use crate::width::{at_width, VectorWidth};
-
-/// The largest `f64` below 1.
-const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// A piecewise-bilinear density on `[0, 1]²` over a rectilinear node grid, sampled
 /// by picking a patch and then a point in it (see the module docs).
@@ -874,7 +871,7 @@ fn check_nodes(axis: &str, nodes: &[f64]) -> Result<()> {
 #[inline(always)]
 pub(crate) fn sample_linear(xi: f64, a: f64, b: f64) -> f64 {
     let denominator = a + ((1.0 - xi) * a * a + xi * b * b).sqrt();
-    let x = (xi * (a + b) / denominator).clamp(0.0, ONE_MINUS_EPSILON_F64);
+    let x = (xi * (a + b) / denominator).clamp(0.0, BELOW_ONE);
     // A zero denominator is a = 0 and ξ b² = 0: the density's zero end.
     let x = if denominator > 0.0 { x } else { 0.0 };
     if a == b {
@@ -932,13 +929,14 @@ fn guided_patch(nodes: &[f64], guide: &[u32], x: f64) -> usize {
     lo + nodes[lo + 1..=hi].partition_point(|&n| below(n, x))
 }
 
-/// The corners `[f_00, f_10, f_01, f_11]` of patch `[i, k]` of the node values
-/// `values`, `mu` per row.
+/// The corners `[f_00, f_10, f_01, f_11]` (top-left, top-right, bottom-left,
+/// bottom-right) of patch `[i, k]` of the node values `values`, `mu` per row:
+/// also the product sampler's bilinear cells ([`crate::product`]).
 ///
 /// # Panics
 /// When the patch is outside the grid.
 #[inline(always)]
-fn corners(values: &[f32], mu: usize, i: usize, k: usize) -> [f64; 4] {
+pub(crate) fn corners(values: &[f32], mu: usize, i: usize, k: usize) -> [f64; 4] {
     assert!(
         i + 1 < mu && (k + 2) * mu <= values.len(),
         "patch outside the grid"
@@ -1168,7 +1166,7 @@ fn unit_closed(x: f32) -> f64 {
 #[inline]
 fn unit_open(x: f32) -> f64 {
     if x > 0.0 {
-        (x as f64).min(ONE_MINUS_EPSILON_F64)
+        (x as f64).min(BELOW_ONE)
     } else {
         0.0
     }
@@ -1502,7 +1500,7 @@ mod tests {
             (0.0, 0.0),
         ] {
             for k in 0..=100 {
-                let xi = (k as f64 / 100.0).min(ONE_MINUS_EPSILON_F64);
+                let xi = (k as f64 / 100.0).min(BELOW_ONE);
                 let x = sample_linear(xi, a, b);
                 assert!((0.0..1.0).contains(&x), "{a} {b} {xi} → {x}");
                 assert!(

@@ -26,9 +26,7 @@
 use crate::distribution::{
     cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D, ONE_MINUS_EPSILON,
 };
-
-/// The largest `f64` below 1: rescaled sample coordinates stay in `[0, 1)`.
-const ONE_MINUS_EPSILON_F64: f64 = 1.0 - f64::EPSILON / 2.0;
+use crate::math::BELOW_ONE;
 
 /// One step of the walk: from a node of a coarser level to one of its children.
 ///
@@ -358,7 +356,7 @@ fn split(first: f64, second: f64, xi: &mut f64) -> bool {
     };
     let rescaled = numerator / denominator;
     *xi = if denominator > 0.0 {
-        rescaled.min(ONE_MINUS_EPSILON_F64)
+        rescaled.min(BELOW_ONE)
     } else {
         *xi
     };
@@ -382,7 +380,7 @@ fn unsplit(first: f64, second: f64, chose_second: bool, xi: &mut f64) {
 #[inline]
 fn unit(xi: f32) -> f64 {
     if xi > 0.0 {
-        (xi as f64).min(ONE_MINUS_EPSILON_F64)
+        (xi as f64).min(BELOW_ONE)
     } else {
         0.0
     }

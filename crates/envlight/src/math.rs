@@ -116,6 +116,32 @@ pub(crate) fn is_positive_finite(x: f32) -> bool {
     x.to_bits().wrapping_sub(1) < 0x7f7f_ffff
 }
 
+/// The largest `f64` below 1 (`1 - 2⁻⁵³`): the clamp that keeps a rescaled sample
+/// coordinate in `[0, 1)`.
+pub(crate) const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
+
+/// `a · b` of f64 3-vectors, summed left to right (`a₀b₀ + a₁b₁ + a₂b₂`).
+#[inline(always)]
+pub(crate) fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `a × b` of f64 3-vectors.
+#[inline(always)]
+pub(crate) fn cross3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// The Euclidean length of an f64 3-vector, `√(a · a)` with [`dot3`].
+#[inline(always)]
+pub(crate) fn norm3(a: [f64; 3]) -> f64 {
+    dot3(a, a).sqrt()
+}
+
 /// `n` as f32 by way of i64: one instruction on x86-64, where converting a `usize`
 /// takes a sequence (it must handle values above `i64::MAX`).
 #[inline]

@@ -69,7 +69,7 @@
 
 use crate::color::luminance;
 use crate::light::{EnvironmentLight, LightSample};
-use crate::math::Vec3;
+use crate::math::{cross3, dot3, norm3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -132,28 +132,12 @@ fn gt(a: f64, b: f64) -> bool {
 }
 
 #[inline(always)]
-fn dot(a: D3, b: D3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-#[inline(always)]
 fn sub(a: D3, b: D3) -> D3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 #[inline(always)]
 fn scale(a: D3, s: f64) -> D3 {
     [a[0] * s, a[1] * s, a[2] * s]
-}
-#[inline(always)]
-fn cross(a: D3, b: D3) -> D3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-#[inline(always)]
-fn length(a: D3) -> f64 {
-    dot(a, a).sqrt()
 }
 #[inline(always)]
 fn d3(v: Vec3) -> D3 {
@@ -199,7 +183,7 @@ impl Portal {
             }
         }
         let c = corners.map(d3);
-        let diagonal = length(sub(c[2], c[0])).max(length(sub(c[3], c[1])));
+        let diagonal = norm3(sub(c[2], c[0])).max(norm3(sub(c[3], c[1])));
         if !gt(diagonal, 0.0) {
             return Err(PortalError::Degenerate("its corners coincide".into()));
         }
@@ -211,9 +195,9 @@ impl Portal {
             nn[1] += (p[2] - q[2]) * (p[0] + q[0]);
             nn[2] += (p[0] - q[0]) * (p[1] + q[1]);
         }
-        let twice_area = length(nn);
+        let twice_area = norm3(nn);
         let spread = (0..4)
-            .map(|k| length(cross(sub(c[(k + 1) % 4], c[k]), sub(c[(k + 2) % 4], c[k]))))
+            .map(|k| norm3(cross3(sub(c[(k + 1) % 4], c[k]), sub(c[(k + 2) % 4], c[k]))))
             .fold(0.0, f64::max);
         if !gt(twice_area, 1e-9 * diagonal * diagonal) && spread > 1e-6 * diagonal * diagonal {
             // The corners span an area but the signed outline does not: a bow tie.
@@ -228,7 +212,7 @@ impl Portal {
         let centroid = scale([0, 1, 2].map(|i| c.iter().map(|p| p[i]).sum::<f64>()), 0.25);
         let distance = c
             .iter()
-            .map(|p| dot(sub(*p, centroid), n).abs())
+            .map(|p| dot3(sub(*p, centroid), n).abs())
             .fold(0.0, f64::max);
         let tolerance = PLANARITY_TOLERANCE * diagonal;
         if distance > tolerance {
@@ -241,8 +225,8 @@ impl Portal {
         for k in 0..4 {
             let e0 = sub(c[k], c[(k + 3) % 4]);
             let e1 = sub(c[(k + 1) % 4], c[k]);
-            let turn = dot(cross(e0, e1), n);
-            let scale_k = length(e0) * length(e1);
+            let turn = dot3(cross3(e0, e1), n);
+            let scale_k = norm3(e0) * norm3(e1);
             if !gt(turn.abs(), 1e-6 * scale_k) {
                 return Err(PortalError::Degenerate(format!(
                     "corners {}, {} and {} are on one line (or two coincide)",
@@ -257,21 +241,21 @@ impl Portal {
         }
         // The oblique frame, with the edges projected onto the plane.
         let in_plane = |v: D3| {
-            let v = sub(v, scale(n, dot(v, n)));
-            scale(v, 1.0 / length(v))
+            let v = sub(v, scale(n, dot3(v, n)));
+            scale(v, 1.0 / norm3(v))
         };
-        let origin = sub(c[0], scale(n, dot(sub(c[0], centroid), n)));
+        let origin = sub(c[0], scale(n, dot3(sub(c[0], centroid), n)));
         let a = in_plane(sub(c[1], c[0]));
         let b = in_plane(sub(c[3], c[0]));
-        let cos_gamma = dot(a, b);
-        let sin_gamma = dot(cross(a, b), n);
-        let bn = cross(b, n);
-        let na = cross(n, a);
-        let a_dual = scale(bn, 1.0 / dot(a, bn));
-        let b_dual = scale(na, 1.0 / dot(b, na));
+        let cos_gamma = dot3(a, b);
+        let sin_gamma = dot3(cross3(a, b), n);
+        let bn = cross3(b, n);
+        let na = cross3(n, a);
+        let a_dual = scale(bn, 1.0 / dot3(a, bn));
+        let b_dual = scale(na, 1.0 / dot3(b, na));
         let st = c.map(|p| {
             let q = sub(p, origin);
-            [dot(q, a_dual), dot(q, b_dual)]
+            [dot3(q, a_dual), dot3(q, b_dual)]
         });
         let bounds = [
             st.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min),
@@ -342,15 +326,15 @@ impl Portal {
     /// the quad (ahead of `p`).
     pub fn intersects(&self, p: Vec3, direction: Vec3) -> bool {
         let (p, w) = (d3(p), d3(direction));
-        let dn = dot(w, self.n);
-        let h = dot(sub(self.origin, p), self.n);
+        let dn = dot3(w, self.n);
+        let h = dot3(sub(self.origin, p), self.n);
         if dn == 0.0 || h == 0.0 || (h > 0.0) != (dn > 0.0) {
             return false;
         }
         let q = sub(p, self.origin);
         let t = h / dn;
         let hit = [q[0] + t * w[0], q[1] + t * w[1], q[2] + t * w[2]];
-        self.contains_st(dot(hit, self.a_dual), dot(hit, self.b_dual))
+        self.contains_st(dot3(hit, self.a_dual), dot3(hit, self.b_dual))
     }
 
     /// The oblique frame direction `x â + y b̂ + σ n̂` (not normalised).
@@ -559,13 +543,13 @@ impl PortalLight {
     fn window(&self, t: &PortalTables, p: D3) -> Window {
         let portal = &t.portal;
         let q = sub(p, portal.origin);
-        let h = -dot(q, portal.n);
+        let h = -dot3(q, portal.n);
         if !gt(h.abs(), 1e-9 * portal.area.sqrt()) {
             return Window::EMPTY;
         }
         let side = usize::from(h < 0.0);
         let d = h.abs();
-        let (sp, tp) = (dot(q, portal.a_dual), dot(q, portal.b_dual));
+        let (sp, tp) = (dot3(q, portal.a_dual), dot3(q, portal.b_dual));
         let [s0, s1, t0, t1] = portal.bounds;
         let n = self.n as f64;
         let cell = |x: f64| n * (0.5 + x.atan() / PI);
@@ -604,7 +588,7 @@ fn build_side(light: &EnvironmentLight, portal: &Portal, sigma: f64, n: usize) -
                 for su in 0..2 {
                     let x = tans[2 * i + su];
                     let w = portal.frame_direction(x, y, sigma);
-                    let len = length(w);
+                    let len = norm3(w);
                     let dir = Vec3::new(
                         (w[0] / len) as f32,
                         (w[1] / len) as f32,
@@ -844,7 +828,7 @@ impl PortalPoint<'_> {
         if !gt(w.z, 0.0) {
             return None;
         }
-        let xi0 = (t / w.z).clamp(0.0, 1.0 - f64::EPSILON / 2.0);
+        let xi0 = (t / w.z).clamp(0.0, crate::math::BELOW_ONE);
         let table = &self.light.portals[k];
         let n = self.light.n;
         let [uc, vc] = table
@@ -854,7 +838,7 @@ impl PortalPoint<'_> {
         let y = (PI * (vc / n as f64 - 0.5)).tan();
         let sigma = if w.side == 0 { 1.0 } else { -1.0 };
         let dir = table.portal.frame_direction(x, y, sigma);
-        let len = length(dir);
+        let len = norm3(dir);
         let direction = Vec3::new(
             (dir[0] / len) as f32,
             (dir[1] / len) as f32,
@@ -905,12 +889,12 @@ impl PortalPoint<'_> {
             }
             let portal = &table.portal;
             let sigma = if win.side == 0 { 1.0 } else { -1.0 };
-            let lambda = sigma * dot(w, portal.n);
+            let lambda = sigma * dot3(w, portal.n);
             if !gt(lambda, 0.0) {
                 continue;
             }
-            let x = dot(w, portal.a_dual) / lambda;
-            let y = dot(w, portal.b_dual) / lambda;
+            let x = dot3(w, portal.a_dual) / lambda;
+            let y = dot3(w, portal.b_dual) / lambda;
             if !portal.contains_st(win.sp + win.d * x, win.tp + win.d * y) {
                 continue;
             }
@@ -1035,12 +1019,12 @@ mod tests {
         .unwrap();
         let dir = |u: f64, w: f64| {
             let d = p.frame_direction((PI * (u - 0.5)).tan(), (PI * (w - 0.5)).tan(), 1.0);
-            scale(d, 1.0 / length(d))
+            scale(d, 1.0 / norm3(d))
         };
         let (u, w, h) = (0.61, 0.37, 1e-5);
         let du = scale(sub(dir(u + h, w), dir(u - h, w)), 0.5 / h);
         let dv = scale(sub(dir(u, w + h), dir(u, w - h)), 0.5 / h);
-        let fd = length(cross(du, dv));
+        let fd = norm3(cross3(du, dv));
         let x = (PI * (u - 0.5)).tan();
         let y = (PI * (w - 0.5)).tan();
         assert!(

@@ -67,7 +67,7 @@
 use crate::color::LUMINANCE_WEIGHTS;
 use crate::image::EnvImage;
 use crate::light::{EnvironmentLight, Mapping};
-use crate::math::Vec3;
+use crate::math::{cross3, dot3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -353,7 +353,7 @@ impl Grid {
         let cos_alpha = alpha.min(PI).cos();
         let near = |x: usize, y: usize| -> Option<Near> {
             let dir = self.direction(x, y);
-            let cos = dot(dir, c);
+            let cos = dot3(dir, c);
             (cos >= cos_alpha).then(|| {
                 let index = y * self.w + x;
                 Near {
@@ -499,7 +499,7 @@ fn find(image: &EnvImage, grid: &Grid, options: &SunOptions) -> Option<Found> {
     }
     let solid_angle = (energy_y / peak_excess).min(2.0 * PI);
     let angular_radius = (1.0 - solid_angle / (2.0 * PI)).clamp(-1.0, 1.0).acos();
-    let irradiance = moment_rgb.map(|m| dot(m, direction).max(0.0));
+    let irradiance = moment_rgb.map(|m| dot3(m, direction).max(0.0));
     let sin_r = angular_radius.sin();
     let disc_factor = PI * sin_r * sin_r;
     let radiance = irradiance.map(|e| e / disc_factor);
@@ -662,8 +662,8 @@ impl Fill {
 }
 
 fn basis(axes: [[f64; 3]; 2], scale: f64, dir: [f64; 3]) -> [f64; 6] {
-    let x = dot(dir, axes[0]) / scale;
-    let y = dot(dir, axes[1]) / scale;
+    let x = dot3(dir, axes[0]) / scale;
+    let y = dot3(dir, axes[1]) / scale;
     [1.0, x, y, x * x, x * y, y * y]
 }
 
@@ -674,8 +674,8 @@ fn tangent_axes(n: [f64; 3]) -> [[f64; 3]; 2] {
     } else {
         [1.0, 0.0, 0.0]
     };
-    let a = normalize(cross(helper, n)).unwrap_or([1.0, 0.0, 0.0]);
-    let b = cross(n, a);
+    let a = normalize(cross3(helper, n)).unwrap_or([1.0, 0.0, 0.0]);
+    let b = cross3(n, a);
     [a, b]
 }
 
@@ -729,21 +729,8 @@ fn lum_f64(t: [f64; 3]) -> f64 {
     w[0] as f64 * t[0] + w[1] as f64 * t[1] + w[2] as f64 * t[2]
 }
 
-#[inline]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
 fn normalize(v: [f64; 3]) -> Option<[f64; 3]> {
-    let len = dot(v, v).sqrt();
+    let len = dot3(v, v).sqrt();
     (len > 0.0 && len.is_finite()).then(|| v.map(|c| c / len))
 }
 
@@ -756,8 +743,8 @@ fn add_scaled(acc: &mut [f64; 3], v: [f64; 3], s: f64) {
 /// The angle between two unit vectors, accurate for small angles.
 #[inline]
 fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let c = cross(a, b);
-    dot(c, c).sqrt().atan2(dot(a, b))
+    let c = cross3(a, b);
+    dot3(c, c).sqrt().atan2(dot3(a, b))
 }
 
 #[cfg(test)]

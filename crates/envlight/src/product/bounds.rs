@@ -5,6 +5,7 @@
 
 use super::tuning::{BOUNDARY_STEPS, BOUND_SHARE, BOX_SLACK, CONE_SLACK, MEAN_GRID};
 use crate::light::{EnvironmentLight, Mapping};
+use crate::math::{cross3, dot3, norm3};
 use std::f64::consts::PI;
 
 /// An upper bound of the arc length on the sphere per unit length in `(u, v)` of
@@ -39,11 +40,11 @@ impl Cone {
     /// negative). `sin α` is read off the cross product, exact near `α = 0`.
     #[inline]
     pub fn max_cos(&self, v: [f64; 3]) -> f64 {
-        let cos = dot(v, self.axis);
+        let cos = dot3(v, self.axis);
         if cos >= self.cos_half {
             return 1.0;
         }
-        let sin = norm(cross(v, self.axis));
+        let sin = norm3(cross3(v, self.axis));
         cos * self.cos_half + sin * self.sin_half
     }
 }
@@ -227,7 +228,7 @@ pub(super) fn bounding_cone(light: &EnvironmentLight, u: [f64; 2], v: [f64; 2]) 
             }
         }
     }
-    let length = norm(mean);
+    let length = norm3(mean);
     if !(length > 1e-9 && length.is_finite()) {
         return Cone::FULL;
     }
@@ -243,7 +244,7 @@ pub(super) fn bounding_cone(light: &EnvironmentLight, u: [f64; 2], v: [f64; 2]) 
             (u[1], v[0] + t * dv),
         ] {
             let (d, _) = direction(pu, pv);
-            farthest = farthest.max(norm(cross(axis, d)).atan2(dot(axis, d)));
+            farthest = farthest.max(norm3(cross3(axis, d)).atan2(dot3(axis, d)));
         }
     }
     let (step_u, step_v) = (du / BOUNDARY_STEPS as f64, dv / BOUNDARY_STEPS as f64);
@@ -268,23 +269,4 @@ pub(super) fn bounding_cone(light: &EnvironmentLight, u: [f64; 2], v: [f64; 2]) 
     } else {
         Cone::FULL
     }
-}
-
-#[inline]
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline]
-pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline]
-pub(super) fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }

@@ -14,10 +14,11 @@
 //! these patches no weight; a shading point mixes the tables' component, weighted
 //! by the sum of the mixed tables' weights, with the bright patches' weights.
 
-use super::bounds::{dot, Direction, PatchBound, Region};
+use super::bounds::{Direction, PatchBound, Region};
 use super::factor::lobe_proxy;
 use super::fine::Fine;
 use super::tuning::{BRIGHT_MAX_HALF_ANGLE, BRIGHT_SHARE, MAX_BRIGHT};
+use crate::math::dot3;
 
 /// One bright patch, with what its weight needs, stored together.
 #[derive(Debug, Clone, Copy)]
@@ -131,7 +132,7 @@ impl Bright {
                 // The bound (at most 1 and its slack) matters only when the
                 // cosine at the centre is below its share of it.
                 Target::Cosine { normal } => {
-                    let value = dot(normal.v, item.centre);
+                    let value = dot3(normal.v, item.centre);
                     if bound.keeps_cosine(value) {
                         *o = item.power * value;
                         total += *o;
@@ -144,10 +145,10 @@ impl Bright {
                     mirror,
                     alpha2,
                 } => {
-                    let cos = dot(normal.v, item.centre).max(0.0);
+                    let cos = dot3(normal.v, item.centre).max(0.0);
                     let cos_upper = item.region.max_dot(normal).max(0.0);
                     (
-                        cos * lobe_proxy(*alpha2, dot(mirror.v, item.centre)),
+                        cos * lobe_proxy(*alpha2, dot3(mirror.v, item.centre)),
                         cos_upper * lobe_proxy(*alpha2, item.region.max_dot(mirror)),
                     )
                 }

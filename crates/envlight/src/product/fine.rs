@@ -24,7 +24,7 @@
 
 use super::bounds::Region;
 use super::pick::{self, Slot};
-use crate::bilinear::sample_linear;
+use crate::bilinear::{corners, sample_linear};
 use crate::distribution::{cell_index, nudge_into_cell, CDF_ONE};
 use crate::light::{bilinear_nodes, Density, EnvironmentLight};
 use rayon::prelude::*;
@@ -500,19 +500,6 @@ impl Fine {
             + 24 * self.centres.len()
             + nodes
     }
-}
-
-/// The four corner values `[top-left, top-right, bottom-left, bottom-right]` of
-/// bilinear cell `(i, j)` from node values `mu` wide.
-#[inline]
-fn corners(values: &[f32], mu: usize, i: usize, j: usize) -> [f64; 4] {
-    let (top, bottom) = (&values[j * mu + i..], &values[(j + 1) * mu + i..]);
-    [
-        top[0] as f64,
-        top[1] as f64,
-        bottom[0] as f64,
-        bottom[1] as f64,
-    ]
 }
 
 /// Builds one band of patches (one patch row, the cells of `band`'s patches, the

@@ -81,12 +81,11 @@ pub use tuning::{HORIZON_BAND, MIN_HORIZON_BAND};
 
 use crate::distribution::CDF_ONE;
 use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
-use crate::math::{is_positive_finite, Vec3};
+use crate::math::{is_positive_finite, Vec3, BELOW_ONE};
 use bounds::Direction;
 use bright::{Bright, Target};
 use factor::reflect;
 use fine::Fine;
-use pick::BELOW_ONE;
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 use tables::{Lobe, Mix, Tables};
@@ -640,7 +639,7 @@ impl ShadingPoint<'_> {
                     mirror,
                     alpha2: alpha * alpha,
                 };
-                (target, bounds::dot(normal.v, mirror.v).max(alpha))
+                (target, crate::math::dot3(normal.v, mirror.v).max(alpha))
             }
             _ => (Target::Cosine { normal }, 1.0),
         };

@@ -15,6 +15,7 @@
 //! A cell of width 0 has `T = 0` and is nobody's alias, so it is never returned.
 
 use crate::distribution::{Distribution1D, CDF_ONE};
+use crate::math::BELOW_ONE;
 
 /// One slot: keep the slot's own cell below `threshold` (of [`CDF_ONE`] units),
 /// else take `alias`.
@@ -68,9 +69,6 @@ pub(super) fn received(slots: &[Slot]) -> Vec<u128> {
     }
     got
 }
-
-/// The largest f64 below 1.
-pub(super) const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// Fills `slots` (as long as `widths`) with the exact alias table of the
 /// fixed-point widths `widths`, which sum to [`CDF_ONE`] or are all 0 (then every

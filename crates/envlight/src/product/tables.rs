@@ -17,13 +17,13 @@
 //! the six axis directions, 17° at the octants' centres for 16 cells a side); the
 //! neighbourhood cones follow each node's own cells.
 
-use super::bounds::{dot, norm, Direction, PatchBound};
+use super::bounds::{Direction, PatchBound};
 use super::factor::lobe_proxy;
 use super::fine::Fine;
 use super::pick::{self, Slot};
 use super::tuning::{BOUNDARY_STEPS, BOUND_SHARE, CONE_SLACK, FLOOR_BUDGET};
 use crate::distribution::CDF_ONE;
-use crate::math::Vec3;
+use crate::math::{dot3, norm3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::FRAC_PI_2;
 
@@ -312,7 +312,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
     let at = octahedral_to_sphere;
     let cell = 1.0 / n as f64;
     let axis = at(a as f64 * cell, b as f64 * cell);
-    let length = norm(axis);
+    let length = norm3(axis);
     let axis = axis.map(|x| x / length);
     let lo = |x: usize| (x as f64 - 1.0).max(0.0) * cell;
     let hi = |x: usize| ((x + 1) as f64 * cell).min(1.0);
@@ -323,7 +323,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
         let (pu, pv) = (u[0] + t * (u[1] - u[0]), v[0] + t * (v[1] - v[0]));
         for (x, y) in [(pu, v[0]), (pu, v[1]), (u[0], pv), (u[1], pv)] {
             let d = at(x, y);
-            farthest = farthest.max(dot(axis, d).clamp(-1.0, 1.0).acos());
+            farthest = farthest.max(dot3(axis, d).clamp(-1.0, 1.0).acos());
         }
     }
     let step = (u[1] - u[0]).max(v[1] - v[0]) / BOUNDARY_STEPS as f64;
@@ -365,7 +365,7 @@ fn fill_weights(
             Some((sin_b, cos_b)) if m < cos_b => m * cos_b + (1.0 - m * m).sqrt() * sin_b,
             Some(_) => 1.0,
         };
-        let centre = dot(axis.v, *centre);
+        let centre = dot3(axis.v, *centre);
         let (value, upper) = match lobe {
             Lobe::Cosine => (centre.max(0.0), reach.max(0.0)),
             Lobe::Glossy { alpha2 } => (lobe_proxy(alpha2, centre), lobe_proxy(alpha2, reach)),

@@ -1,13 +1,14 @@
 //! Unit tests of the product sampler: its parts (regions, neighbourhoods, tiling)
 //! and its promises (pdf of a sample, normalisation, support, radiance, batches).
 
-use super::bounds::{cross, dot, norm, EQUAL_AREA_LIPSCHITZ};
+use super::bounds::EQUAL_AREA_LIPSCHITZ;
 use super::*;
 use crate::color::luminance;
 use crate::distribution::CDF_ONE;
 use crate::image::{EnvImage, Lookup};
 use crate::light::{Density, LightOptions, Sampler};
 use crate::math::Rotation;
+use crate::math::{cross3, dot3, norm3};
 use crate::rng::{xi_2d, SplitMix64};
 use std::f64::consts::PI;
 
@@ -223,7 +224,7 @@ fn patch_points(sampler: &ProductSampler, k: usize, grid: usize) -> Vec<[f32; 2]
 
 fn angle(a: [f64; 3], d: Vec3) -> f64 {
     let d = [d.x as f64, d.y as f64, d.z as f64];
-    norm(cross(a, d)).atan2(dot(a, d))
+    norm3(cross3(a, d)).atan2(dot3(a, d))
 }
 
 #[test]
