@@ -30,6 +30,16 @@ cell by inverting the bilinear function's marginal and conditional (f64).
 import drjit as dr
 import numpy as np
 
+from ._drjit_tables import (
+    _BRIGHT_BOX,
+    _BRIGHT_CENTRE,
+    _BRIGHT_CONE,
+    _BRIGHT_HAS_BOX,
+    _BRIGHT_PATCH,
+    _BRIGHT_POWER,
+    _BRIGHT_WORDS,
+)
+
 CDF_ONE = 4294967295.0
 INV_CDF_ONE = 1.0 / CDF_ONE
 # 1 − 2⁻⁵³: the largest f64 below 1.
@@ -80,7 +90,7 @@ class TableProduct:
         # An empty table is one of total 0: the mix reads the totals only.
         if not np.array_equal(empty, np.asarray(tables["node_totals"]) == 0.0):
             raise ValueError("the product tables' empty nodes are not those of total 0")
-        bright = np.asarray(tables["bright"], dtype=np.float64).reshape(-1, 20)
+        bright = np.asarray(tables["bright"], dtype=np.float64).reshape(-1, _BRIGHT_WORDS)
         # Python floats: numpy scalars would turn Dr.Jit arrays into numpy arrays.
         self.bright = [[float(x) for x in row] for row in bright]
 
@@ -206,8 +216,8 @@ class TableProduct:
 
     def _max_dot(self, item, v0, v1, v2, rho):
         """``Region::max_dot``: an upper bound of v·ω over the bright patch's directions."""
-        if item[10] != 0.0:
-            e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[11:20]
+        if item[_BRIGHT_HAS_BOX] != 0.0:
+            e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[_BRIGHT_BOX]
             side0 = e00 * v1 - e01 * v0
             side1 = v0 * e11 - v1 * e10
             edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
@@ -221,7 +231,7 @@ class TableProduct:
             peak = dr.sqrt(a * a + b * b)
             ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
             return dr.select(inside_theta, peak, ends) + self.box_slack
-        ax, ay, az, cos_half, sin_half = item[5:10]
+        ax, ay, az, cos_half, sin_half = item[_BRIGHT_CONE]
         cos = (v0 * ax + v1 * ay) + v2 * az
         cx = v1 * az - v2 * ay
         cy = v2 * ax - v0 * az
@@ -255,7 +265,8 @@ class TableProduct:
         # lies wholly above the horizon (`Bright::lowest_above`).
         lowest = 0.0 * v0 + self.horizon_band
         for item in self.bright:
-            power, cx, cy, cz = item[1], item[2], item[3], item[4]
+            power = item[_BRIGHT_POWER]
+            cx, cy, cz = item[_BRIGHT_CENTRE]
             value = (v0 * cx + v1 * cy) + v2 * cz
             upper = dr.maximum(self._max_dot(item, v0, v1, v2, rho), 0.0)
             g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
@@ -377,6 +388,10 @@ class TableProduct:
     @staticmethod
     def _sample_linear(xi, a, b):
         """``bilinear::sample_linear`` in f64: x ∈ [0, 1) from the density ∝ a (1 − x) + b x."""
+        # Not `_drjit_tables.TableLight._sample_linear` on purpose: that one is the
+        # WGSL's (f32, normalised by max(a, b), clamped below 1 − 2⁻²⁴) for the
+        # light's sampling; this is the CPU product sampler's, in f64, unnormalised,
+        # clamped below 1 − 2⁻⁵³. Sharing one would change results in the last bits.
         denominator = a + dr.sqrt((1.0 - xi) * a * a + xi * b * b)
         ok = denominator > 0.0
         x = dr.clip(xi * (a + b) / dr.select(ok, denominator, 1.0), 0.0, BELOW_ONE)
@@ -477,7 +492,7 @@ class TableProduct:
         patch_b = 0 * b
         for c, weight in enumerate(state["bright"]):
             weight_b = dr.select(b == c, weight, weight_b)
-            patch_b = dr.select(b == c, int(self.bright[c][0]), patch_b)
+            patch_b = dr.select(b == c, int(self.bright[c][_BRIGHT_PATCH]), patch_b)
         xb = dr.clip((x - start) / dr.select(weight_b > 0.0, weight_b, 1.0), 0.0, BELOW_ONE)
         in_tables = x < ts
         k = dr.select(in_tables, kt, patch_b)

@@ -24,7 +24,12 @@ import math
 import drjit as dr
 import numpy as np
 
-# Parameter-block words (docs/gpu-tables.md, "Parameter block").
+# Parameter-block words (docs/gpu-tables.md, "Parameter block"): the constants of
+# `envlight::gpu::param` (crates/envlight/src/gpu/mod.rs), lower-cased, which
+# python/tests/test_gpu_tables.py checks these against. The two rotations take
+# 12 words each (three rows `x, y, z, 0`).
+_PARAMS_WORDS = 64
+_LIGHT_TO_WORLD, _WORLD_TO_LIGHT = 0, 12
 _W = {
     "version": 24, "sampler": 25, "density": 26, "mapping": 27, "lookup": 28,
     "radiance_format": 29, "rotated": 30, "black": 31, "image_width": 32,
@@ -35,6 +40,19 @@ _W = {
     "bilinear_v_nodes": 50,
 }
 _F32_WORDS = {"scale", "integral_luminance"}
+
+# A row of the product tables' `bright` array (f64, docs/gpu-tables.md, "Product
+# tables"): one bright patch. `_BRIGHT_CONE` is the bounding cone (axis x, y, z,
+# cos and sin of the half-angle); `_BRIGHT_BOX` the lat-long box when
+# `_BRIGHT_HAS_BOX` is 1 (cos, sin of 2πu₀; cos, sin of 2πu₁; 1 if u₁ − u₀ < ½;
+# sin, cos of πv₀; sin, cos of πv₁), else zeros (equal-area).
+_BRIGHT_WORDS = 20
+_BRIGHT_PATCH = 0
+_BRIGHT_POWER = 1
+_BRIGHT_CENTRE = slice(2, 5)
+_BRIGHT_CONE = slice(5, 10)
+_BRIGHT_HAS_BOX = 10
+_BRIGHT_BOX = slice(11, 20)
 
 SAMPLER_INVERSION, SAMPLER_ALIAS = 0, 1
 DENSITY_CONSTANT, DENSITY_BILINEAR = 0, 1
@@ -57,8 +75,8 @@ SETTLE_STEPS = 6
 def read_params(words):
     """The parameter block (64 uint32 words) as a dict of Python numbers."""
     words = np.asarray(words, dtype=np.uint32)
-    if words.shape != (64,):
-        raise ValueError(f"the parameter block has {words.size} words, expected 64")
+    if words.shape != (_PARAMS_WORDS,):
+        raise ValueError(f"the parameter block has {words.size} words, expected {_PARAMS_WORDS}")
     p = {}
     for name, at in _W.items():
         if name in _F32_WORDS:
@@ -66,8 +84,8 @@ def read_params(words):
         else:
             p[name] = int(words[at])
     # Python floats: numpy scalars would turn Dr.Jit arrays into numpy arrays.
-    p["light_to_world"] = words[0:12].view(np.float32).reshape(3, 4)[:, :3].tolist()
-    p["world_to_light"] = words[12:24].view(np.float32).reshape(3, 4)[:, :3].tolist()
+    for name, at in (("light_to_world", _LIGHT_TO_WORLD), ("world_to_light", _WORLD_TO_LIGHT)):
+        p[name] = words[at : at + 12].view(np.float32).reshape(3, 4)[:, :3].tolist()
     return p
 
 
@@ -355,6 +373,12 @@ class TableLight:
     @staticmethod
     def _sample_linear(xi, a, b):
         """x ∈ [0, 1) from the density ∝ a (1 − x) + b x: the stable root of its CDF."""
+        # The WGSL's `sample_linear` (f32, a and b normalised by their maximum, then
+        # clamped below 1 − 2⁻²⁴), for the light's own bilinear sampling. Not the
+        # same function as `_drjit_product.TableProduct._sample_linear` on purpose:
+        # that one is the CPU's `bilinear::sample_linear` (f64, no normalisation,
+        # clamped below 1 − 2⁻⁵³) that the product sampler uses; sharing one would
+        # change results in the last bits.
         m = dr.maximum(a, b)
         m = dr.select(m > 0.0, m, 1.0)
         an = a / m

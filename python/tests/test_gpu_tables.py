@@ -2,6 +2,8 @@
 arrays, checked for shapes and dtypes, against the map, against the documented
 layout, and against the file `envlight export` writes."""
 
+import pathlib
+import re
 import subprocess
 
 import numpy as np
@@ -11,19 +13,52 @@ import envlight
 
 CDF_ONE = 2**32 - 1
 
-# Word indices of the parameter block (docs/gpu-tables.md).
-VERSION, SAMPLER, DENSITY, RADIANCE_FORMAT = 24, 25, 26, 29
-IMAGE_W, IMAGE_H, TABLE_W, TABLE_H, SCALE = 32, 33, 34, 35, 36
+# The Rust source of the parameter block's layout: the one definition of its words.
+RUST_GPU_MOD = pathlib.Path(__file__).resolve().parents[2] / "crates" / "envlight" / "src" / "gpu" / "mod.rs"
+
+
+def rust_param_words():
+    """``envlight::gpu::param``'s constants (name → word), read from the Rust source."""
+    if not RUST_GPU_MOD.is_file():
+        pytest.skip(f"the Rust source is not here ({RUST_GPU_MOD})", allow_module_level=True)
+    text = RUST_GPU_MOD.read_text(encoding="utf-8")
+    block = re.search(r"pub mod param \{(.*?)\n\}", text, re.S)
+    assert block, "no `pub mod param` in gpu/mod.rs"
+    words = {name: int(value) for name, value in re.findall(r"pub const (\w+): usize = (\d+);", block.group(1))}
+    assert words, "no constants in `pub mod param`"
+    total = re.search(r"pub const PARAMS_WORDS: usize = (\d+);", text)
+    assert total, "no PARAMS_WORDS in gpu/mod.rs"
+    words["PARAMS_WORDS"] = int(total.group(1))
+    return words
+
+
+# Word indices of the parameter block (docs/gpu-tables.md), from the Rust constants.
+PARAM = rust_param_words()
+VERSION, SAMPLER, DENSITY, RADIANCE_FORMAT = (PARAM[k] for k in ("VERSION", "SAMPLER", "DENSITY", "RADIANCE_FORMAT"))
+IMAGE_W, IMAGE_H, TABLE_W, TABLE_H, SCALE = (
+    PARAM[k] for k in ("IMAGE_WIDTH", "IMAGE_HEIGHT", "TABLE_WIDTH", "TABLE_HEIGHT", "SCALE")
+)
 OFFSETS = {
-    "marginal_cdf": 38,
-    "marginal_guide": 39,
-    "conditional_cdf": 41,
-    "conditional_guide": 42,
-    "alias_slots": 44,
-    "alias_func": 45,
-    "bilinear_values": 48,
+    name: PARAM[name.upper()]
+    for name in (
+        "marginal_cdf", "marginal_guide", "conditional_cdf", "conditional_guide",
+        "alias_slots", "alias_func", "bilinear_values",
+    )
 }
-TABLES_WORDS = 49
+TABLES_WORDS = PARAM["TABLES_WORDS"]
+
+
+def test_the_drjit_port_reads_the_rust_words():
+    """``_drjit_tables._W`` (the Dr.Jit port's words) is the Rust layout."""
+    pytest.importorskip("drjit")
+    from envlight import _drjit_tables
+
+    for name, word in _drjit_tables._W.items():
+        assert PARAM.get(name.upper()) == word, name
+    assert _drjit_tables._PARAMS_WORDS == PARAM["PARAMS_WORDS"]
+    assert (PARAM["LIGHT_TO_WORLD"], PARAM["WORLD_TO_LIGHT"]) == (
+        _drjit_tables._LIGHT_TO_WORLD, _drjit_tables._WORLD_TO_LIGHT,
+    )
 
 
 def small_map(h=16, w=32):

@@ -464,6 +464,68 @@ mod tests {
         assert!(ENTRY_POINTS.contains(&DEFAULT_ENTRY_POINT));
     }
 
+    /// The WGSL `Params` struct is the parameter block of `envlight::gpu::param`:
+    /// each member's byte offset, as naga lays the uniform out, is 4 × its word.
+    #[test]
+    fn params_struct_matches_the_rust_word_offsets() {
+        use envlight::gpu::{param, PARAMS_WORDS};
+        let (module, _) = validate().unwrap_or_else(|e| panic!("{e}\n{e:?}"));
+        let (members, span) = module
+            .types
+            .iter()
+            .find_map(|(_, ty)| match (&ty.name, &ty.inner) {
+                (Some(name), naga::TypeInner::Struct { members, span }) if name == "Params" => {
+                    Some((members, *span))
+                }
+                _ => None,
+            })
+            .expect("the WGSL declares struct Params");
+        let words: &[(&str, usize)] = &[
+            ("light_to_world", param::LIGHT_TO_WORLD),
+            ("world_to_light", param::WORLD_TO_LIGHT),
+            ("version", param::VERSION),
+            ("sampler", param::SAMPLER),
+            ("density", param::DENSITY),
+            ("mapping", param::MAPPING),
+            ("lookup", param::LOOKUP),
+            ("radiance_format", param::RADIANCE_FORMAT),
+            ("rotated", param::ROTATED),
+            ("black", param::BLACK),
+            ("image_width", param::IMAGE_WIDTH),
+            ("image_height", param::IMAGE_HEIGHT),
+            ("table_width", param::TABLE_WIDTH),
+            ("table_height", param::TABLE_HEIGHT),
+            ("scale", param::SCALE),
+            ("integral_luminance", param::INTEGRAL_LUMINANCE),
+            ("marginal_cdf", param::MARGINAL_CDF),
+            ("marginal_guide", param::MARGINAL_GUIDE),
+            ("marginal_guide_shift", param::MARGINAL_GUIDE_SHIFT),
+            ("conditional_cdf", param::CONDITIONAL_CDF),
+            ("conditional_guide", param::CONDITIONAL_GUIDE),
+            ("conditional_guide_bits", param::CONDITIONAL_GUIDE_BITS),
+            ("alias_slots", param::ALIAS_SLOTS),
+            ("alias_func", param::ALIAS_FUNC),
+            ("alias_offset_bits", param::ALIAS_OFFSET_BITS),
+            ("alias_inv_integral", param::ALIAS_INV_INTEGRAL),
+            ("bilinear_values", param::BILINEAR_VALUES),
+            ("tables_words", param::TABLES_WORDS),
+            ("bilinear_v_nodes", param::BILINEAR_V_NODES),
+            // Words RESERVED.. (51–63): one u32, then three vec4<u32>.
+            ("reserved1", param::RESERVED),
+            ("reserved", param::RESERVED + 1),
+        ];
+        let got: Vec<(&str, u32)> = members
+            .iter()
+            .map(|m| (m.name.as_deref().unwrap_or(""), m.offset))
+            .collect();
+        let want: Vec<(&str, u32)> = words
+            .iter()
+            .map(|&(name, word)| (name, 4 * word as u32))
+            .collect();
+        assert_eq!(got, want);
+        assert_eq!(span as usize, 4 * PARAMS_WORDS);
+    }
+
     #[test]
     fn every_language_translates_every_entry_point() {
         for lang in Lang::ALL {
