@@ -276,6 +276,43 @@ impl AliasTable2D {
     }
 }
 
+/// Vose's pairing, the one construction behind both alias tables (this module's,
+/// and the product sampler's exact one in fixed point): `units[i]` is cell `i`'s
+/// mass scaled so that a slot holds `capacity`. Cells short of `capacity` (in
+/// index order, the last first) are each paired with a cell holding at least
+/// `capacity`, which gives what they lack: `pair(short, its units, giver)` is
+/// called once per short cell paired, and the giver keeps
+/// `(giver + short) - capacity`, moving to the short cells when that falls below
+/// `capacity`. Returns the cells left unpaired: `(full, short)`. In exact
+/// arithmetic every full cell then holds exactly `capacity` and no short cell is
+/// left; in floating point a few may be, within rounding of `capacity`.
+pub(crate) fn vose_pairing<U>(
+    units: &mut [U],
+    capacity: U,
+    mut pair: impl FnMut(u32, U, u32),
+) -> (Vec<u32>, Vec<u32>)
+where
+    U: Copy + PartialOrd + std::ops::Add<Output = U> + std::ops::Sub<Output = U>,
+{
+    let (mut short, mut full): (Vec<u32>, Vec<u32>) =
+        (0..units.len() as u32).partition(|&i| units[i as usize] < capacity);
+    while let (Some(&s), Some(&g)) = (short.last(), full.last()) {
+        short.pop();
+        let (su, gu) = (s as usize, g as usize);
+        pair(s, units[su], g);
+        // The giver holds at least `capacity`, so what it keeps is never negative
+        // (in floating point, `(a + b) - c` with `a ≥ c` and `b ≥ 0` rounds to
+        // at least 0).
+        let rest = (units[gu] + units[su]) - capacity;
+        units[gu] = rest;
+        if rest < capacity {
+            full.pop();
+            short.push(g);
+        }
+    }
+    (full, short)
+}
+
 /// Vose's construction for a function with total `Σ f = total > 0`.
 fn build_slots(func: &[f32], total: f64) -> Vec<Slot> {
     let n = func.len();
@@ -291,32 +328,15 @@ fn build_slots(func: &[f32], total: f64) -> Vec<Slot> {
             alias: 0,
         },
     );
-    let mut light: Vec<u32> = Vec::new();
-    let mut heavy: Vec<u32> = Vec::new();
-    for (i, &qi) in q.iter().enumerate() {
-        if qi < 1.0 {
-            light.push(i as u32);
-        } else {
-            heavy.push(i as u32);
-        }
-    }
+    let (heavy, light) = vose_pairing(&mut q, 1.0, |l, ql, g| {
+        slots[l as usize] = Slot {
+            threshold: ql as f32,
+            alias: g,
+        };
+    });
     // Any cell with mass: the alias of last resort for a zero cell left over when
     // rounding exhausts the heavy list first.
     let fallback = func.iter().position(|&x| x > 0.0).unwrap_or(0) as u32;
-    while let (Some(&l), Some(&g)) = (light.last(), heavy.last()) {
-        light.pop();
-        slots[l as usize] = Slot {
-            threshold: q[l as usize] as f32,
-            alias: g,
-        };
-        // (q_g + q_l) ≥ 1 rounds to ≥ 1, so the remainder never goes negative.
-        let rest = (q[g as usize] + q[l as usize]) - 1.0;
-        q[g as usize] = rest;
-        if rest < 1.0 {
-            heavy.pop();
-            light.push(g);
-        }
-    }
     for &g in &heavy {
         slots[g as usize] = Slot {
             threshold: 1.0,

@@ -42,7 +42,7 @@ use crate::distribution::{
     ONE_MINUS_EPSILON, STAGED_BLOCK,
 };
 use crate::error::{Error, Result};
-use crate::math::{prefetch_ptr, BELOW_ONE};
+use crate::math::{prefetch_ptr, unit_interval, BELOW_ONE};
 use crate::width::{at_width, VectorWidth};
 
 /// A piecewise-bilinear density on `[0, 1]²` over a rectilinear node grid, sampled
@@ -590,8 +590,8 @@ impl BilinearDistribution2D {
     /// The uniform point with pdf 0 that a function with no mass gives for `ξ`.
     fn sample_black(&self, xi: [f32; 2]) -> Sample2D {
         let uv = [
-            (unit_open(xi[0]) as f32).min(ONE_MINUS_EPSILON),
-            (unit_open(xi[1]) as f32).min(ONE_MINUS_EPSILON),
+            (unit_interval(xi[0]) as f32).min(ONE_MINUS_EPSILON),
+            (unit_interval(xi[1]) as f32).min(ONE_MINUS_EPSILON),
         ];
         Sample2D {
             uv,
@@ -1157,16 +1157,6 @@ fn unit_closed(x: f32) -> f64 {
     let y = (x as f64).min(1.0);
     if x > 0.0 {
         y
-    } else {
-        0.0
-    }
-}
-
-/// `ξ` in `[0, 1)` as an `f64`; NaN gives 0.
-#[inline]
-fn unit_open(x: f32) -> f64 {
-    if x > 0.0 {
-        (x as f64).min(BELOW_ONE)
     } else {
         0.0
     }

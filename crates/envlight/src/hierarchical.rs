@@ -26,7 +26,7 @@
 use crate::distribution::{
     cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D, ONE_MINUS_EPSILON,
 };
-use crate::math::BELOW_ONE;
+use crate::math::{unit_interval, BELOW_ONE};
 
 /// One step of the walk: from a node of a coarser level to one of its children.
 ///
@@ -259,7 +259,7 @@ impl Hierarchical2D {
     /// NaN are clamped.
     #[inline(always)]
     pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        let (mut xi0, mut xi1) = (unit(xi[0]), unit(xi[1]));
+        let (mut xi0, mut xi1) = (unit_interval(xi[0]), unit_interval(xi[1]));
         if self.integral <= 0.0 {
             return self.uniform_sample(xi0, xi1);
         }
@@ -319,11 +319,11 @@ impl Hierarchical2D {
     #[inline]
     pub fn invert(&self, uv: [f32; 2]) -> [f32; 2] {
         if self.integral <= 0.0 {
-            return [unit(uv[0]) as f32, unit(uv[1]) as f32];
+            return [unit_interval(uv[0]) as f32, unit_interval(uv[1]) as f32];
         }
         let (mut x, mut y) = (cell_index(uv[0], self.nu), cell_index(uv[1], self.nv));
-        let mut xi0 = (unit(uv[0]) * self.nu as f64 - x as f64).clamp(0.0, 1.0);
-        let mut xi1 = (unit(uv[1]) * self.nv as f64 - y as f64).clamp(0.0, 1.0);
+        let mut xi0 = (unit_interval(uv[0]) * self.nu as f64 - x as f64).clamp(0.0, 1.0);
+        let mut xi1 = (unit_interval(uv[1]) * self.nv as f64 - y as f64).clamp(0.0, 1.0);
         for step in self.steps.iter().rev() {
             let (block, slot) = step.locate(x, y);
             let [a, b, c, d] = self.block(block);
@@ -373,16 +373,6 @@ fn unsplit(first: f64, second: f64, chose_second: bool, xi: &mut f64) {
         } else {
             *xi * first / sum
         };
-    }
-}
-
-/// `ξ` clamped into `[0, 1)` as an `f64`; NaN gives 0.
-#[inline]
-fn unit(xi: f32) -> f64 {
-    if xi > 0.0 {
-        (xi as f64).min(BELOW_ONE)
-    } else {
-        0.0
     }
 }
 

@@ -120,6 +120,16 @@ pub(crate) fn is_positive_finite(x: f32) -> bool {
 /// coordinate in `[0, 1)`.
 pub(crate) const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
+/// `ξ` clamped into `[0, 1)` as an `f64`; NaN gives 0.
+#[inline(always)]
+pub(crate) fn unit_interval(xi: f32) -> f64 {
+    if xi > 0.0 {
+        (xi as f64).min(BELOW_ONE)
+    } else {
+        0.0
+    }
+}
+
 /// `a · b` of f64 3-vectors, summed left to right (`a₀b₀ + a₁b₁ + a₂b₂`).
 #[inline(always)]
 pub(crate) fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -704,20 +714,10 @@ mod tests {
                 assert_eq!(lanes[i].to_bits(), atan2_pi(ys[i], xs[i]).to_bits());
                 let j = (i + 5) % 16;
                 let pair = atan2_pi_pair([ys[i], ys[j]], [xs[i], xs[j]]);
-                assert_eq!(
-                    pair[0].to_bits(),
-                    lanes[i].to_bits(),
-                    "pair ({}, {})",
-                    ys[i],
-                    xs[i]
-                );
-                assert_eq!(
-                    pair[1].to_bits(),
-                    lanes[j].to_bits(),
-                    "pair ({}, {})",
-                    ys[j],
-                    xs[j]
-                );
+                for (got, k) in pair.into_iter().zip([i, j]) {
+                    let (y, x) = (ys[k], xs[k]);
+                    assert_eq!(got.to_bits(), lanes[k].to_bits(), "pair ({y}, {x})");
+                }
             }
         }
     }

@@ -125,6 +125,41 @@ pub enum PortalError {
 
 type D3 = [f64; 3];
 
+/// Where the increasing piecewise-linear function `at` (knots at the integer
+/// cells, `n` of them) reaches `target` within `range` (cell units): the last knot
+/// `k` of the range with `at_knot(k) ≤ target` by bisection (`at_knot` is `at`
+/// at the knot, or the range's start for a knot before it), then the point on the
+/// linear piece from that knot. Returns the piece's cell and the point; `None`
+/// on a flat piece (only reachable at the CDF's flat ends, a null set).
+#[inline(always)]
+fn invert_linear_pieces(
+    n: usize,
+    range: [f64; 2],
+    target: f64,
+    at_knot: impl Fn(usize) -> f64,
+    at: impl Fn(f64) -> f64,
+) -> Option<(usize, f64)> {
+    let (mut lo, mut hi) = (
+        (range[0] as usize).min(n - 1),
+        (range[1].ceil() as usize).clamp(1, n) - 1,
+    );
+    hi = hi.max(lo);
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if at_knot(mid) <= target {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    let (a, b) = ((lo as f64).max(range[0]), ((lo + 1) as f64).min(range[1]));
+    let (fa, fb) = (at(a), at(b));
+    if !gt(fb, fa) {
+        return None;
+    }
+    Some((lo, (a + (target - fa) / (fb - fa) * (b - a)).clamp(a, b)))
+}
+
 /// `a > b`, false when either is NaN: `!gt(x, 0.0)` reads "not positive (or NaN)".
 #[inline(always)]
 fn gt(a: f64, b: f64) -> bool {
@@ -707,50 +742,12 @@ impl SideTable {
                 self.band_at_row(n, u, j)
             }
         };
-        let (mut lo, mut hi) = (
-            (v[0] as usize).min(n - 1),
-            (v[1].ceil() as usize).clamp(1, n) - 1,
-        );
-        hi = hi.max(lo);
-        while lo < hi {
-            let mid = (lo + hi).div_ceil(2);
-            if band_at(mid) <= target {
-                lo = mid;
-            } else {
-                hi = mid - 1;
-            }
-        }
-        let j = lo;
-        let (va, vb) = ((j as f64).max(v[0]), ((j + 1) as f64).min(v[1]));
-        let (ga, gb) = (self.band(n, u, va), self.band(n, u, vb));
-        if !gt(gb, ga) {
-            return None;
-        }
-        let vs = (va + (target - ga) / (gb - ga) * (vb - va)).clamp(va, vb);
+        let (j, vs) = invert_linear_pieces(n, v, target, band_at, |x| self.band(n, u, x))?;
         // Column: row j's CDF restricted to [u0, u1].
         let r0 = self.row_integral(n, j, u[0]);
         let target = r0 + xi[0] * (self.row_integral(n, j, u[1]) - r0);
         let row_at = |i: usize| self.row_integral(n, j, (i as f64).max(u[0]));
-        let (mut lo, mut hi) = (
-            (u[0] as usize).min(n - 1),
-            (u[1].ceil() as usize).clamp(1, n) - 1,
-        );
-        hi = hi.max(lo);
-        while lo < hi {
-            let mid = (lo + hi).div_ceil(2);
-            if row_at(mid) <= target {
-                lo = mid;
-            } else {
-                hi = mid - 1;
-            }
-        }
-        let i = lo;
-        let (ua, ub) = ((i as f64).max(u[0]), ((i + 1) as f64).min(u[1]));
-        let (ra, rb) = (self.row_integral(n, j, ua), self.row_integral(n, j, ub));
-        if !gt(rb, ra) {
-            return None;
-        }
-        let us = (ua + (target - ra) / (rb - ra) * (ub - ua)).clamp(ua, ub);
+        let (_, us) = invert_linear_pieces(n, u, target, row_at, |x| self.row_integral(n, j, x))?;
         Some([us, vs])
     }
 }

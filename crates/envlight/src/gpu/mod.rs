@@ -102,18 +102,19 @@ pub mod section {
     /// The name of section `id` (`"marginal_cdf"`, ...), `None` for an id this
     /// version does not know.
     pub fn name(id: u32) -> Option<&'static str> {
-        Some(match id {
-            PARAMS => "params",
-            MARGINAL_CDF => "marginal_cdf",
-            MARGINAL_GUIDE => "marginal_guide",
-            CONDITIONAL_CDF => "conditional_cdf",
-            CONDITIONAL_GUIDE => "conditional_guide",
-            ALIAS_SLOTS => "alias_slots",
-            ALIAS_FUNC => "alias_func",
-            BILINEAR_VALUES => "bilinear_values",
-            RADIANCE => "radiance",
-            _ => return None,
-        })
+        // Ids 1 to 9, in order.
+        const NAMES: [&str; 9] = [
+            "params",
+            "marginal_cdf",
+            "marginal_guide",
+            "conditional_cdf",
+            "conditional_guide",
+            "alias_slots",
+            "alias_func",
+            "bilinear_values",
+            "radiance",
+        ];
+        NAMES.get((id as usize).wrapping_sub(1)).copied()
     }
 }
 

@@ -486,17 +486,8 @@ impl Chromaticities {
     }
 
     fn describe(&self) -> String {
-        format!(
-            "R({:.3},{:.3}) G({:.3},{:.3}) B({:.3},{:.3}) white ({:.4},{:.4})",
-            self.red[0],
-            self.red[1],
-            self.green[0],
-            self.green[1],
-            self.blue[0],
-            self.blue[1],
-            self.white[0],
-            self.white[1]
-        )
+        let [rx, ry, gx, gy, bx, by, wx, wy] = self.values();
+        format!("R({rx:.3},{ry:.3}) G({gx:.3},{gy:.3}) B({bx:.3},{by:.3}) white ({wx:.4},{wy:.4})")
     }
 
     /// The matrix taking RGB in these primaries to CIE XYZ, scaled so that RGB

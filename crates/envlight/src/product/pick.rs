@@ -14,6 +14,7 @@
 //! `T_s / C`) returns cell `i` with probability `w_i / C`, the width the pdf reads.
 //! A cell of width 0 has `T = 0` and is nobody's alias, so it is never returned.
 
+use crate::alias::vose_pairing;
 use crate::distribution::{Distribution1D, CDF_ONE};
 use crate::math::BELOW_ONE;
 
@@ -93,26 +94,16 @@ pub(super) fn build(widths: &[u32], slots: &mut [Slot]) {
     let n = widths.len() as u128;
     let capacity = CDF_ONE as u128;
     let mut units: Vec<u128> = widths.iter().map(|&w| n * w as u128).collect();
-    let (mut small, mut large): (Vec<u32>, Vec<u32>) =
-        (0..widths.len() as u32).partition(|&i| units[i as usize] < capacity);
-    while let (Some(&s), Some(&l)) = (small.last(), large.last()) {
-        small.pop();
-        let (su, lu) = (s as usize, l as usize);
-        slots[su] = Slot {
-            threshold: units[su] as u32,
+    let (full, short) = vose_pairing(&mut units, capacity, |s, su, l| {
+        slots[s as usize] = Slot {
+            threshold: su as u32,
             alias: l,
         };
-        // `l` holds at least `capacity` units: it can give what `s` lacks.
-        units[lu] -= capacity - units[su];
-        if units[lu] < capacity {
-            large.pop();
-            small.push(l);
-        }
-    }
+    });
     // In exact arithmetic what is left holds exactly `capacity` units a slot, so
-    // `small` is empty here and every slot left in `large` keeps its own cell.
-    debug_assert!(small.is_empty());
-    for &l in &large {
+    // no short cell is left and every full one keeps its own cell.
+    debug_assert!(short.is_empty());
+    for &l in &full {
         debug_assert_eq!(units[l as usize], capacity);
         slots[l as usize].threshold = CDF_ONE;
     }
