@@ -80,9 +80,41 @@ public:
     T *get() const noexcept { return p_; }
     explicit operator bool() const noexcept { return p_ != nullptr; }
 
+    /// The owner of the handle that `make(args..., &p)` writes to `p`; throws
+    /// envlight::error when `make` fails.
+    template <typename Make, typename... Args>
+    static handle made_by(Make make, Args... args) {
+        T *p = nullptr;
+        check(make(args..., &p));
+        return handle(p);
+    }
+
 private:
     T *p_ = nullptr;
 };
+
+/// The base of each wrapper: the C handle it owns.
+template <typename T, void (*Free)(T *)>
+class owner {
+public:
+    /// The C handle, for calls this header does not wrap.
+    const T *get() const noexcept { return h_.get(); }
+
+protected:
+    using handle = detail::handle<T, Free>;
+    explicit owner(handle h) noexcept : h_(std::move(h)) {}
+    handle h_;
+};
+
+/// What `get(args..., &value)` writes to `value` when it returns true, or nothing.
+template <typename T, typename Get, typename... Args>
+std::optional<T> optional_out(Get get, Args... args) noexcept {
+    T value;
+    if (get(args..., &value)) {
+        return value;
+    }
+    return std::nullopt;
+}
 
 }  // namespace detail
 
@@ -97,14 +129,12 @@ class portal_light;
 
 /// An importance-sampled environment light (envlight_light). Queries are const
 /// and thread-safe.
-class light {
+class light : public detail::owner<envlight_light, envlight_light_free> {
 public:
     /// Reads a map file (.hdr, .exr, .pfm, 8-bit .png/.jpg) and builds the light.
     static light load(const std::string &path,
                       const envlight_light_options &options = default_options()) {
-        envlight_light *p = nullptr;
-        detail::check(envlight_light_load(path.c_str(), &options, &p));
-        return light(p);
+        return light(handle::made_by(envlight_light_load, path.c_str(), &options));
     }
 
     /// Builds a light from `height` rows of `width` RGB texels (row 0 at the top);
@@ -114,18 +144,12 @@ public:
                           const envlight_light_options &options = default_options()) {
         detail::check_size(static_cast<std::size_t>(rgb.size()),
                            std::size_t(width) * height * 3, "rgb");
-        envlight_light *p = nullptr;
-        detail::check(envlight_light_from_rgb(rgb.data(), width, height, &options, &p));
-        return light(p);
+        return light(handle::made_by(envlight_light_from_rgb, rgb.data(), width, height, &options));
     }
 
     /// A direction for `u` in [0, 1)^2, or nothing (a black map).
     std::optional<envlight_sample> sample(const std::array<float, 2> &u) const noexcept {
-        envlight_sample s;
-        if (envlight_light_sample(h_.get(), u.data(), &s)) {
-            return s;
-        }
-        return std::nullopt;
+        return detail::optional_out<envlight_sample>(envlight_light_sample, h_.get(), u.data());
     }
 
     /// The solid-angle pdf (per steradian) of a unit world direction.
@@ -188,35 +212,22 @@ public:
     /// owned by the returned handle.
     using gpu_tables = detail::handle<envlight_gpu_tables, envlight_gpu_tables_free>;
     gpu_tables export_gpu_tables(std::uint32_t radiance_format = ENVLIGHT_RADIANCE_F32) const {
-        envlight_gpu_tables *t = nullptr;
-        detail::check(envlight_light_gpu_tables(h_.get(), radiance_format, &t));
-        return gpu_tables(t);
+        return gpu_tables::made_by(envlight_light_gpu_tables, h_.get(), radiance_format);
     }
 
-    /// The C handle, for calls this header does not wrap.
-    const envlight_light *get() const noexcept { return h_.get(); }
-
 private:
-    explicit light(envlight_light *p) noexcept : h_(p) {}
-    detail::handle<envlight_light, envlight_light_free> h_;
+    explicit light(handle h) noexcept : owner(std::move(h)) {}
 };
 
 /// Product sampling at shading points (envlight_product).
-class product {
+class product : public detail::owner<envlight_product, envlight_product_free> {
 public:
-    explicit product(const light &l) {
-        envlight_product *p = nullptr;
-        detail::check(envlight_product_new(l.get(), &p));
-        h_ = detail::handle<envlight_product, envlight_product_free>(p);
-    }
+    explicit product(const light &l) : owner(handle::made_by(envlight_product_new, l.get())) {}
 
     std::optional<envlight_sample> sample(const envlight_factor &factor,
                                           const std::array<float, 2> &u) const noexcept {
-        envlight_sample s;
-        if (envlight_product_sample(h_.get(), &factor, u.data(), &s)) {
-            return s;
-        }
-        return std::nullopt;
+        return detail::optional_out<envlight_sample>(envlight_product_sample, h_.get(), &factor,
+                                                     u.data());
     }
 
     float pdf(const envlight_factor &factor, const std::array<float, 3> &direction) const noexcept {
@@ -239,61 +250,38 @@ public:
         detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
         detail::check(envlight_product_pdf_batch(h_.get(), factors.data(), directions.data(), n, pdf.data()));
     }
-
-    const envlight_product *get() const noexcept { return h_.get(); }
-
-private:
-    detail::handle<envlight_product, envlight_product_free> h_;
 };
 
 /// The light seen through portals (envlight_portal_light).
-class portal_light {
+class portal_light : public detail::owner<envlight_portal_light, envlight_portal_light_free> {
 public:
     /// `corners`: 12 floats per portal (four corners x, y, z in order around it).
     template <typename C>
-    portal_light(const light &l, const C &corners, std::uint32_t resolution = 0) {
-        envlight_portal_light *p = nullptr;
-        detail::check(envlight_portal_light_new(l.get(), corners.data(),
-                                                static_cast<std::size_t>(corners.size()) / 12,
-                                                resolution, &p));
-        h_ = detail::handle<envlight_portal_light, envlight_portal_light_free>(p);
-    }
+    portal_light(const light &l, const C &corners, std::uint32_t resolution = 0)
+        : owner(handle::made_by(envlight_portal_light_new, l.get(), corners.data(),
+                                static_cast<std::size_t>(corners.size()) / 12, resolution)) {}
 
     std::optional<envlight_sample> sample(const std::array<float, 3> &point,
                                           const std::array<float, 2> &u) const noexcept {
-        envlight_sample s;
-        if (envlight_portal_light_sample(h_.get(), point.data(), u.data(), &s)) {
-            return s;
-        }
-        return std::nullopt;
+        return detail::optional_out<envlight_sample>(envlight_portal_light_sample, h_.get(),
+                                                     point.data(), u.data());
     }
 
     float pdf(const std::array<float, 3> &point, const std::array<float, 3> &direction) const noexcept {
         return envlight_portal_light_pdf(h_.get(), point.data(), direction.data());
     }
-
-    const envlight_portal_light *get() const noexcept { return h_.get(); }
-
-private:
-    detail::handle<envlight_portal_light, envlight_portal_light_free> h_;
 };
 
 /// The sun of a light and the map without it (envlight_sun_extraction).
-class sun_extraction {
+class sun_extraction
+    : public detail::owner<envlight_sun_extraction, envlight_sun_extraction_free> {
 public:
-    explicit sun_extraction(const light &l) {
-        envlight_sun_extraction *p = nullptr;
-        detail::check(envlight_light_extract_sun(l.get(), &p));
-        h_ = detail::handle<envlight_sun_extraction, envlight_sun_extraction_free>(p);
-    }
+    explicit sun_extraction(const light &l)
+        : owner(handle::made_by(envlight_light_extract_sun, l.get())) {}
 
     /// The sun, or nothing when the map has none.
     std::optional<envlight_sun> sun() const noexcept {
-        envlight_sun s;
-        if (envlight_sun_extraction_sun(h_.get(), &s)) {
-            return s;
-        }
-        return std::nullopt;
+        return detail::optional_out<envlight_sun>(envlight_sun_extraction_sun, h_.get());
     }
 
     /// The residual image's width and height.
@@ -309,9 +297,6 @@ public:
         detail::check(envlight_sun_extraction_residual(h_.get(), rgb.data(),
                                                        static_cast<std::size_t>(rgb.size())));
     }
-
-private:
-    detail::handle<envlight_sun_extraction, envlight_sun_extraction_free> h_;
 };
 
 }  // namespace envlight

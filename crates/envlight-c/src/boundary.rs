@@ -149,6 +149,15 @@ pub(crate) unsafe fn deref<'a, T>(
     function: &str,
     name: &str,
 ) -> Result<&'a T, Failure> {
+    check_pointer(p, function, name)?;
+    // SAFETY: `check_pointer` found `p` non-NULL and aligned, and the caller
+    // promises that such a `p` points to a valid `T` for `'a`.
+    Ok(unsafe { &*p })
+}
+
+/// The checks of [`deref()`]: an invalid-argument failure naming `name` when `p`
+/// is NULL or misaligned.
+fn check_pointer<T>(p: *const T, function: &str, name: &str) -> Result<(), Failure> {
     if p.is_null() {
         return Err(Failure::argument(function, format_args!("{name} is NULL")));
     }
@@ -158,9 +167,7 @@ pub(crate) unsafe fn deref<'a, T>(
             format_args!("{name} is misaligned"),
         ));
     }
-    // SAFETY: `p` was checked non-NULL and aligned just above, and the caller
-    // promises that such a `p` points to a valid `T` for `'a`.
-    Ok(unsafe { &*p })
+    Ok(())
 }
 
 /// `&mut *p`, checked as [`deref()`].
@@ -207,11 +214,10 @@ pub(crate) unsafe fn c_str<'a>(
     function: &str,
     name: &str,
 ) -> Result<&'a CStr, Failure> {
-    if p.is_null() {
-        return Err(Failure::argument(function, format_args!("{name} is NULL")));
-    }
-    // SAFETY: `p` is non-NULL (checked above) and the caller promises a
-    // NUL-terminated string there for `'a`; `c_char` has no alignment to check.
+    // A `c_char` is never misaligned: only NULL fails.
+    check_pointer(p, function, name)?;
+    // SAFETY: `check_pointer` found `p` non-NULL, and the caller promises a
+    // NUL-terminated string there for `'a`.
     Ok(unsafe { CStr::from_ptr(p) })
 }
 
@@ -360,19 +366,34 @@ pub(crate) unsafe fn write_whole(bytes: &[u8], buf: *mut u8, len: usize) {
 // Handles.
 // ---------------------------------------------------------------------------
 
-/// Stores a new handle at `out`.
-pub(crate) fn put<T>(out: &mut *mut T, value: T) {
-    *out = Box::into_raw(Box::new(value));
-}
-
-/// Frees a handle made by [`put`] (NULL: nothing), never unwinding into C.
+/// Runs the body of an entry point that makes a handle: `*out` is set to NULL
+/// before anything else can fail, then holds the new handle of what `build`
+/// makes (to free with [`free`]).
 ///
 /// # Safety
-/// A non-NULL `handle` must come from [`put`] with the same `T`, and not have been
-/// freed; nothing may use it afterwards.
+/// As [`cleared`] for `out`: a non-NULL, aligned `out` must point to a writable
+/// `*mut T` that nothing else accesses during the call.
+pub(crate) unsafe fn new_handle<T>(
+    function: &str,
+    out: *mut *mut T,
+    build: impl FnOnce() -> Result<T, Failure>,
+) -> envlight_status {
+    run(function, || {
+        // SAFETY: forwarded: the caller makes `cleared`'s promise for `out`.
+        let out = unsafe { cleared(out, std::ptr::null_mut(), function, "out") }?;
+        *out = Box::into_raw(Box::new(build()?));
+        Ok(())
+    })
+}
+
+/// Frees a handle made by [`new_handle`] (NULL: nothing), never unwinding into C.
+///
+/// # Safety
+/// A non-NULL `handle` must come from [`new_handle`] with the same `T`, and not
+/// have been freed; nothing may use it afterwards.
 pub(crate) unsafe fn free<T>(handle: *mut T) {
     if !handle.is_null() {
-        // SAFETY: the caller promises a non-NULL handle came from `put`'s
+        // SAFETY: the caller promises a non-NULL handle came from `new_handle`'s
         // `Box::into_raw` of a `Box<T>` and is freed this once, so the box is
         // rebuilt and dropped exactly once.
         let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(handle) })));

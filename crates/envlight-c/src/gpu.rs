@@ -1,9 +1,13 @@
 //! The light's tables for a GPU: the flat buffers and file format of
 //! `docs/gpu-tables.md`, which a shader (or any port of the sampling math) reads.
 
-use envlight::gpu::{GpuTableOptions, GpuTables, RadianceFormat};
+use std::sync::Arc;
 
-use crate::boundary::{cleared, deref, free, put, run, value, write_whole, Failure};
+use envlight::gpu::{GpuTableOptions, GpuTables, RadianceFormat};
+use envlight::EnvironmentLight;
+
+use crate::boundary::{cleared, deref, free, value, write_whole, Failure};
+use crate::light::new_from_light;
 use crate::{envlight_light, envlight_status};
 
 /// How `envlight_light_gpu_tables` stores the radiance image.
@@ -34,17 +38,7 @@ pub extern "C" fn envlight_light_gpu_tables(
     out: *mut *mut envlight_gpu_tables,
 ) -> envlight_status {
     const F: &str = "envlight_light_gpu_tables";
-    run(F, || {
-        // SAFETY: by the C contract `out` is NULL or points to a writable
-        // `envlight_gpu_tables *`, and `light` is NULL or a light from
-        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
-        // reject NULL and misaligned pointers.
-        let (out, light) = unsafe {
-            (
-                cleared(out, std::ptr::null_mut(), F, "out")?,
-                deref(light, F, "light")?,
-            )
-        };
+    let build = |light: &Arc<EnvironmentLight>| -> Result<_, Failure> {
         let radiance = match radiance_format {
             0 => RadianceFormat::F32,
             1 => RadianceFormat::F16,
@@ -57,23 +51,23 @@ pub extern "C" fn envlight_light_gpu_tables(
                 ))
             }
         };
-        let tables = light.light.gpu_tables(&GpuTableOptions { radiance })?;
-        put(
-            out,
-            envlight_gpu_tables {
-                tables,
-                bytes: Default::default(),
-            },
-        );
-        Ok(())
-    })
+        let tables = light.gpu_tables(&GpuTableOptions { radiance })?;
+        Ok(envlight_gpu_tables {
+            tables,
+            bytes: Default::default(),
+        })
+    };
+    // SAFETY: by the C contract `out` is NULL or points to a writable
+    // `envlight_gpu_tables *`, and `light` is NULL or a light from
+    // envlight_light_load/_from_rgb not yet freed (only read).
+    unsafe { new_from_light(F, light, out, build) }
 }
 
 /// Frees GPU tables (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_gpu_tables_free(tables: *mut envlight_gpu_tables) {
     // SAFETY: by the C contract a non-NULL `tables` came from
-    // envlight_light_gpu_tables (which `put`s an `envlight_gpu_tables`) and is freed
+    // envlight_light_gpu_tables (which makes an `envlight_gpu_tables`) and is freed
     // once, after the last use of the buffers it lent.
     unsafe { free(tables) };
 }

@@ -6,15 +6,15 @@ use std::sync::Arc;
 
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::load::{load, LoadOptions};
-use envlight::{EnvImage, EnvironmentLight, LightSample, Lookup};
+use envlight::{EnvImage, EnvironmentLight, LightSample, Lookup, Vec3};
 
 use crate::boundary::{
-    c_str, cleared, cleared_array, deref, deref_mut, free, put, read, run, slice, slice_mut, value,
+    c_str, cleared_array, deref, deref_mut, free, new_handle, read, run, slice, slice_mut, value,
     Failure,
 };
 use crate::envlight_status;
 use crate::options::{envlight_light_options, options_or_default};
-use crate::sample::{as_vec3, draw_batch, envlight_sample, finite_u, to_c, vec3};
+use crate::sample::{as_vec3, draw_batch, envlight_sample, finite_u, sample_into, vec3};
 
 /// An environment light: an HDR image at infinity and its sampling tables.
 /// Opaque; immutable once built, so a `const` pointer serves any number of
@@ -36,30 +36,51 @@ pub extern "C" fn envlight_light_load(
     out: *mut *mut envlight_light,
 ) -> envlight_status {
     const F: &str = "envlight_light_load";
-    run(F, || {
+    let build = || {
         // SAFETY: by this function's C contract (docs/c-api.md, "Handles, ownership,
-        // lifetime"), `out` is NULL or points to an `envlight_light *` the call may
-        // write, `path` is NULL or a NUL-terminated string, and `options` is NULL or
-        // an `envlight_light_options`, all live and unchanged for the call; the
+        // lifetime"), `path` is NULL or a NUL-terminated string and `options` NULL
+        // or an `envlight_light_options`, both live and unchanged for the call; the
         // helpers reject NULL (and misaligned) pointers before reading.
-        let (out, path, options) = unsafe {
-            (
-                cleared(out, std::ptr::null_mut(), F, "out")?,
-                c_str(path, F, "path")?,
-                options_or_default(options, F)?,
-            )
-        };
-        let path = path_of(path);
-        let image = load(&path, &LoadOptions::default())?.image;
+        let (path, options) = unsafe { (c_str(path, F, "path")?, options_or_default(options, F)?) };
+        let image = load(&path_of(path), &LoadOptions::default())?.image;
+        envlight_light::new(image, options)
+    };
+    // SAFETY: by the C contract `out` is NULL or points to an `envlight_light *` the
+    // call may write, which no other argument overlaps.
+    unsafe { new_handle(F, out, build) }
+}
+
+impl envlight_light {
+    /// The light of `image` with `options`.
+    fn new(image: EnvImage, options: envlight::LightOptions) -> Result<Self, Failure> {
         let light = EnvironmentLight::new(image, options)?;
-        put(
-            out,
-            envlight_light {
-                light: Arc::new(light),
-            },
-        );
-        Ok(())
-    })
+        Ok(Self {
+            light: Arc::new(light),
+        })
+    }
+}
+
+/// Runs the body of an entry point that makes a handle from a light: `*out` is set
+/// to NULL before anything else can fail, `light` is checked, and `*out` then holds
+/// the new handle of what `build` makes of the light (as [`new_handle`]).
+///
+/// # Safety
+/// `out` as for [`new_handle`]; a non-NULL, aligned `light` must be a light from
+/// `envlight_light_load` or `envlight_light_from_rgb`, not yet freed, that the
+/// call only reads.
+pub(crate) unsafe fn new_from_light<T>(
+    function: &str,
+    light: *const envlight_light,
+    out: *mut *mut T,
+    build: impl FnOnce(&Arc<EnvironmentLight>) -> Result<T, Failure>,
+) -> envlight_status {
+    let build = || {
+        // SAFETY: forwarded: the caller makes `deref`'s promise for `light`.
+        let light = unsafe { deref(light, function, "light") }?;
+        build(&light.light)
+    };
+    // SAFETY: forwarded: the caller makes `new_handle`'s promise for `out`.
+    unsafe { new_handle(function, out, build) }
 }
 
 /// A C path as a filesystem path (any bytes on Unix).
@@ -90,15 +111,10 @@ pub extern "C" fn envlight_light_from_rgb(
     out: *mut *mut envlight_light,
 ) -> envlight_status {
     const F: &str = "envlight_light_from_rgb";
-    run(F, || {
-        // SAFETY: by the C contract `out` is NULL or points to a writable
-        // `envlight_light *` that no other argument overlaps; `cleared` rejects NULL
-        // and misaligned pointers.
-        let out = unsafe { cleared(out, std::ptr::null_mut(), F, "out") }?;
-        let light = light_from_rgb(rgb, width, height, options, F)?;
-        put(out, light);
-        Ok(())
-    })
+    let build = || light_from_rgb(rgb, width, height, options, F);
+    // SAFETY: by the C contract `out` is NULL or points to a writable
+    // `envlight_light *` that no other argument overlaps.
+    unsafe { new_handle(F, out, build) }
 }
 
 /// The body of [`envlight_light_from_rgb`].
@@ -151,10 +167,7 @@ fn light_from_rgb(
         ));
     }
     let (image, _) = EnvImage::from_raw("rgb", w, h, texels.to_vec(), false)?;
-    let light = EnvironmentLight::new(image, options)?;
-    Ok(envlight_light {
-        light: Arc::new(light),
-    })
+    envlight_light::new(image, options)
 }
 
 /// Frees a light (NULL: nothing). Handles built from it (product samplers,
@@ -163,7 +176,7 @@ fn light_from_rgb(
 #[no_mangle]
 pub extern "C" fn envlight_light_free(light: *mut envlight_light) {
     // SAFETY: by the C contract a non-NULL `light` came from envlight_light_load or
-    // envlight_light_from_rgb (both `put` an `envlight_light`) and is freed once.
+    // envlight_light_from_rgb (both make an `envlight_light`) and is freed once.
     unsafe { free(light) };
 }
 
@@ -178,21 +191,17 @@ pub extern "C" fn envlight_light_sample(
     out: *mut envlight_sample,
 ) -> bool {
     const F: &str = "envlight_light_sample";
-    value(F, false, || {
-        // SAFETY: by the C contract `out` is NULL or one writable sample, `light`
-        // NULL or a light from envlight_light_load/_from_rgb not yet freed (only
-        // read, so other threads may share it), and `u` NULL or 2 floats; `out`
-        // overlaps neither input. The helpers reject NULL and misaligned pointers.
-        let (out, light, u) = unsafe {
-            (
-                cleared(out, envlight_sample::default(), F, "out")?,
-                deref(light, F, "light")?,
-                read::<2>(u, F, "u")?,
-            )
-        };
-        *out = to_c(sample_checked(&light.light, u));
-        Ok(out.pdf > 0.0)
-    })
+    let draw = || {
+        // SAFETY: by the C contract `light` is NULL or a light from
+        // envlight_light_load/_from_rgb not yet freed (only read, so other threads
+        // may share it), and `u` NULL or 2 floats; the helpers reject NULL and
+        // misaligned pointers.
+        let (light, u) = unsafe { (deref(light, F, "light")?, read::<2>(u, F, "u")?) };
+        Ok(sample_checked(&light.light, u))
+    };
+    // SAFETY: by the C contract `out` is NULL or one writable sample, overlapping
+    // neither input.
+    unsafe { sample_into(F, out, draw) }
 }
 
 /// The light's sample at `u`, none for a non-finite `u`.
@@ -299,22 +308,23 @@ pub extern "C" fn envlight_light_pdf_batch(
     n: usize,
     pdf: *mut f32,
 ) -> envlight_status {
-    const F: &str = "envlight_light_pdf_batch";
-    run(F, || {
-        // SAFETY: by the C contract `light` is NULL or a live light (only read),
-        // and for n > 0 `directions` holds 3n floats and `pdf` n writable floats,
-        // the two apart; the helpers take nothing for n = 0 and otherwise reject
-        // NULL, misaligned and overflowing arrays.
-        let (light, dirs, out) = unsafe {
-            (
-                deref(light, F, "light")?,
-                slice::<f32, 3>(directions, n, F, "directions")?,
-                slice_mut::<f32, 1>(pdf, n, F, "pdf")?,
-            )
-        };
-        light.light.pdf_batch(as_vec3(dirs), out.as_flattened_mut());
-        Ok(())
-    })
+    let query = |light: &EnvironmentLight, dirs: &[Vec3], pdf: &mut [[f32; 1]]| {
+        light.pdf_batch(dirs, pdf.as_flattened_mut());
+    };
+    // SAFETY: by the C contract `light` is NULL or a live light (only read), and
+    // for n > 0 `directions` holds 3n floats and `pdf` n writable floats, the two
+    // apart.
+    unsafe {
+        by_direction(
+            "envlight_light_pdf_batch",
+            light,
+            directions,
+            n,
+            pdf,
+            "pdf",
+            query,
+        )
+    }
 }
 
 /// `envlight_light_radiance` of each of the `n` directions at `directions`,
@@ -326,20 +336,54 @@ pub extern "C" fn envlight_light_radiance_batch(
     n: usize,
     rgb: *mut f32,
 ) -> envlight_status {
-    const F: &str = "envlight_light_radiance_batch";
-    run(F, || {
-        // SAFETY: by the C contract `light` is NULL or a live light (only read),
-        // and for n > 0 `directions` holds 3n floats and `rgb` 3n writable floats,
-        // the two apart; the helpers take nothing for n = 0 and otherwise reject
+    let query = |light: &EnvironmentLight, dirs: &[Vec3], rgb: &mut [[f32; 3]]| {
+        light.radiance_batch(dirs, rgb);
+    };
+    // SAFETY: by the C contract `light` is NULL or a live light (only read), and
+    // for n > 0 `directions` holds 3n floats and `rgb` 3n writable floats, the two
+    // apart.
+    unsafe {
+        by_direction(
+            "envlight_light_radiance_batch",
+            light,
+            directions,
+            n,
+            rgb,
+            "rgb",
+            query,
+        )
+    }
+}
+
+/// Runs the body of a batch query by direction: `light`, the `n` directions at
+/// `directions` (3n floats) and the output, `n` groups of `K` floats at `out`
+/// (named `out_name`), are checked in that order, then `query` fills them in.
+///
+/// # Safety
+/// A non-NULL, aligned `light` must be a live light, only read; for `n > 0`, a
+/// non-NULL, aligned `directions` must hold `3n` floats and `out` `Kn` writable
+/// floats apart from them.
+unsafe fn by_direction<const K: usize>(
+    function: &str,
+    light: *const envlight_light,
+    directions: *const f32,
+    n: usize,
+    out: *mut f32,
+    out_name: &str,
+    query: impl FnOnce(&EnvironmentLight, &[Vec3], &mut [[f32; K]]),
+) -> envlight_status {
+    run(function, || {
+        // SAFETY: forwarded: the caller makes the helpers' promises for `light`,
+        // `directions` and `out`; they take nothing for n = 0 and otherwise reject
         // NULL, misaligned and overflowing arrays.
         let (light, dirs, out) = unsafe {
             (
-                deref(light, F, "light")?,
-                slice::<f32, 3>(directions, n, F, "directions")?,
-                slice_mut::<f32, 3>(rgb, n, F, "rgb")?,
+                deref(light, function, "light")?,
+                slice::<f32, 3>(directions, n, function, "directions")?,
+                slice_mut::<f32, K>(out, n, function, out_name)?,
             )
         };
-        light.light.radiance_batch(as_vec3(dirs), out);
+        query(&light.light, as_vec3(dirs), out);
         Ok(())
     })
 }

@@ -4,10 +4,12 @@
 
 use std::sync::Arc;
 
-use crate::boundary::{cleared, deref, free, put, read, run, slice, slice_mut, value, Failure};
-use crate::sample::{as_vec3, draw_batch, drop_non_finite, finite_u, to_c, vec3};
+use crate::boundary::{deref, free, read, run, slice, slice_mut, value, Failure};
+use crate::light::new_from_light;
+use crate::sample::{as_vec3, draw_batch_at, finite_u, sample_into, vec3};
 use crate::{envlight_light, envlight_sample, envlight_status};
 use envlight::portal::{Portal, PortalLight, PortalOptions};
+use envlight::EnvironmentLight;
 
 /// A light seen through portals. Opaque; a `const` pointer serves any number of
 /// threads (each portal's tables are built, once, the first time a point on its
@@ -31,17 +33,7 @@ pub extern "C" fn envlight_portal_light_new(
     out: *mut *mut envlight_portal_light,
 ) -> envlight_status {
     const F: &str = "envlight_portal_light_new";
-    run(F, || {
-        // SAFETY: by the C contract `out` is NULL or points to a writable
-        // `envlight_portal_light *`, and `light` is NULL or a light from
-        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
-        // reject NULL and misaligned pointers.
-        let (out, light) = unsafe {
-            (
-                cleared(out, std::ptr::null_mut(), F, "out")?,
-                deref(light, F, "light")?,
-            )
-        };
+    let build = |light: &Arc<EnvironmentLight>| -> Result<_, Failure> {
         if count == 0 {
             return Err(Failure::argument(F, "count must be at least 1"));
         }
@@ -61,23 +53,21 @@ pub extern "C" fn envlight_portal_light_new(
         let options = PortalOptions {
             resolution: (resolution != 0).then_some(resolution as usize),
         };
-        let portal_light = PortalLight::new(Arc::clone(&light.light), &portals, options)
+        let light = PortalLight::new(Arc::clone(light), &portals, options)
             .map_err(|e| Failure::argument(F, e))?;
-        put(
-            out,
-            envlight_portal_light {
-                light: portal_light,
-            },
-        );
-        Ok(())
-    })
+        Ok(envlight_portal_light { light })
+    };
+    // SAFETY: by the C contract `out` is NULL or points to a writable
+    // `envlight_portal_light *`, and `light` is NULL or a light from
+    // envlight_light_load/_from_rgb not yet freed (only read).
+    unsafe { new_from_light(F, light, out, build) }
 }
 
 /// Frees a portal light (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_portal_light_free(light: *mut envlight_portal_light) {
     // SAFETY: by the C contract a non-NULL `light` came from
-    // envlight_portal_light_new (which `put`s an `envlight_portal_light`) and is
+    // envlight_portal_light_new (which makes an `envlight_portal_light`) and is
     // freed once.
     unsafe { free(light) };
 }
@@ -94,24 +84,26 @@ pub extern "C" fn envlight_portal_light_sample(
     out: *mut envlight_sample,
 ) -> bool {
     const F: &str = "envlight_portal_light_sample";
-    value(F, false, || {
-        // SAFETY: by the C contract `out` is NULL or one writable sample, `light`
-        // NULL or a portal light not yet freed (only read; its lazily built tables
-        // are behind a lock), `point` NULL or 3 floats and `u` NULL or 2, `out`
-        // overlapping neither; the helpers reject NULL and misaligned pointers.
-        let (out, light, p, u) = unsafe {
+    let draw = || {
+        // SAFETY: by the C contract `light` is NULL or a portal light not yet freed
+        // (only read; its lazily built tables are behind a lock), `point` NULL or 3
+        // floats and `u` NULL or 2; the helpers reject NULL and misaligned pointers.
+        let (light, p, u) = unsafe {
             (
-                cleared(out, envlight_sample::default(), F, "out")?,
                 deref(light, F, "light")?,
                 read::<3>(point, F, "point")?,
                 read::<2>(u, F, "u")?,
             )
         };
-        if finite_u(u) {
-            *out = to_c(light.light.sample(vec3(p), u));
-        }
-        Ok(out.pdf > 0.0)
-    })
+        Ok(if finite_u(u) {
+            light.light.sample(vec3(p), u)
+        } else {
+            None
+        })
+    };
+    // SAFETY: by the C contract `out` is NULL or one writable sample, overlapping
+    // neither input.
+    unsafe { sample_into(F, out, draw) }
 }
 
 /// The density (per steradian) with which `envlight_portal_light_sample` draws
@@ -165,10 +157,8 @@ pub extern "C" fn envlight_portal_light_sample_batch(
         };
         let light = &light.light;
         let points = as_vec3(points);
-        draw_batch(out.as_flattened_mut(), |range, samples| {
-            let u = &u[range.clone()];
+        draw_batch_at(out.as_flattened_mut(), u, |range, u, samples| {
             light.sample_batch(&points[range], u, samples);
-            drop_non_finite(samples, u);
         });
         Ok(())
     })

@@ -3,11 +3,12 @@
 
 use std::sync::Arc;
 
-use envlight::{Factor, ProductOptions, ProductSampler};
+use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler};
 use rayon::prelude::*;
 
-use crate::boundary::{cleared, deref, free, put, read, run, slice, slice_mut, value};
-use crate::sample::{as_vec3, draw_batch, drop_non_finite, finite_u, to_c, vec3, CHUNK};
+use crate::boundary::{deref, free, read, run, slice, slice_mut, value, Failure};
+use crate::light::new_from_light;
+use crate::sample::{as_vec3, draw_batch_at, finite_u, sample_into, vec3, CHUNK};
 use crate::{envlight_light, envlight_sample, envlight_status};
 
 /// A product sampler over a light: its tables for every surface normal, built once
@@ -57,29 +58,21 @@ pub extern "C" fn envlight_product_new(
     light: *const envlight_light,
     out: *mut *mut envlight_product,
 ) -> envlight_status {
-    const F: &str = "envlight_product_new";
-    run(F, || {
-        // SAFETY: by the C contract `out` is NULL or points to a writable
-        // `envlight_product *`, and `light` is NULL or a light from
-        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
-        // reject NULL and misaligned pointers.
-        let (out, light) = unsafe {
-            (
-                cleared(out, std::ptr::null_mut(), F, "out")?,
-                deref(light, F, "light")?,
-            )
-        };
-        let product = ProductSampler::new(Arc::clone(&light.light), ProductOptions::default());
-        put(out, envlight_product { product });
-        Ok(())
-    })
+    let build = |light: &Arc<EnvironmentLight>| -> Result<_, Failure> {
+        let product = ProductSampler::new(Arc::clone(light), ProductOptions::default());
+        Ok(envlight_product { product })
+    };
+    // SAFETY: by the C contract `out` is NULL or points to a writable
+    // `envlight_product *`, and `light` is NULL or a light from
+    // envlight_light_load/_from_rgb not yet freed (only read).
+    unsafe { new_from_light("envlight_product_new", light, out, build) }
 }
 
 /// Frees a product sampler (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_product_free(product: *mut envlight_product) {
     // SAFETY: by the C contract a non-NULL `product` came from envlight_product_new
-    // (which `put`s an `envlight_product`) and is freed once.
+    // (which makes an `envlight_product`) and is freed once.
     unsafe { free(product) };
 }
 
@@ -108,24 +101,26 @@ pub extern "C" fn envlight_product_sample(
     out: *mut envlight_sample,
 ) -> bool {
     const F: &str = "envlight_product_sample";
-    value(F, false, || {
-        // SAFETY: by the C contract `out` is NULL or one writable sample, `product`
-        // NULL or a product sampler not yet freed (only read), `factor` NULL or one
-        // `envlight_factor` and `u` NULL or 2 floats, `out` overlapping neither;
-        // the helpers reject NULL and misaligned pointers.
-        let (out, p, f, u) = unsafe {
+    let draw = || {
+        // SAFETY: by the C contract `product` is NULL or a product sampler not yet
+        // freed (only read), `factor` NULL or one `envlight_factor` and `u` NULL or
+        // 2 floats; the helpers reject NULL and misaligned pointers.
+        let (p, f, u) = unsafe {
             (
-                cleared(out, envlight_sample::default(), F, "out")?,
                 deref(product, F, "product")?,
                 deref(factor, F, "factor")?,
                 read::<2>(u, F, "u")?,
             )
         };
-        if finite_u(u) {
-            *out = to_c(p.product.sample(&self::factor(f), u));
-        }
-        Ok(out.pdf > 0.0)
-    })
+        Ok(if finite_u(u) {
+            p.product.sample(&self::factor(f), u)
+        } else {
+            None
+        })
+    };
+    // SAFETY: by the C contract `out` is NULL or one writable sample, overlapping
+    // no input.
+    unsafe { sample_into(F, out, draw) }
 }
 
 /// The density (per steradian) with which `envlight_product_sample` draws the unit
@@ -178,11 +173,9 @@ pub extern "C" fn envlight_product_sample_batch(
         };
         let p = &p.product;
         let factors = factors.as_flattened();
-        draw_batch(out.as_flattened_mut(), |range, samples| {
-            let u = &u[range.clone()];
+        draw_batch_at(out.as_flattened_mut(), u, |range, u, samples| {
             let f: Vec<Factor> = factors[range].iter().map(factor).collect();
             p.sample_batch(&f, u, samples);
-            drop_non_finite(samples, u);
         });
         Ok(())
     })

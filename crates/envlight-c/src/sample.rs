@@ -5,6 +5,8 @@
 use envlight::{LightSample, Vec3};
 use rayon::prelude::*;
 
+use crate::boundary::{cleared, value, Failure};
+
 /// A direction drawn from a light, with its solid-angle density (per steradian)
 /// and the radiance arriving from it (linear RGB, scale applied). A call that
 /// draws no direction leaves every field 0.
@@ -55,6 +57,26 @@ pub(crate) fn to_c(s: Option<LightSample>) -> envlight_sample {
     }
 }
 
+/// Runs the body of an entry point that draws one sample: `*out` is zeroed before
+/// anything else can fail, then holds the C form of what `draw` draws; returns
+/// whether a direction was drawn (false also for a failure or a panic).
+///
+/// # Safety
+/// A non-NULL, aligned `out` must point to a writable `envlight_sample` that
+/// nothing else accesses during the call.
+pub(crate) unsafe fn sample_into(
+    function: &str,
+    out: *mut envlight_sample,
+    draw: impl FnOnce() -> Result<Option<LightSample>, Failure>,
+) -> bool {
+    value(function, false, || {
+        // SAFETY: forwarded: the caller makes `cleared`'s promise for `out`.
+        let out = unsafe { cleared(out, envlight_sample::default(), function, "out") }?;
+        *out = to_c(draw()?);
+        Ok(out.pdf > 0.0)
+    })
+}
+
 /// Whether a point `u` can be sampled: both coordinates finite.
 #[inline(always)]
 pub(crate) fn finite_u(u: [f32; 2]) -> bool {
@@ -64,7 +86,7 @@ pub(crate) fn finite_u(u: [f32; 2]) -> bool {
 /// No direction for the samples drawn at non-finite points (the single calls
 /// draw none there either).
 #[inline(always)]
-pub(crate) fn drop_non_finite(samples: &mut [Option<LightSample>], u: &[[f32; 2]]) {
+fn drop_non_finite(samples: &mut [Option<LightSample>], u: &[[f32; 2]]) {
     for (s, &u) in samples.iter_mut().zip(u) {
         if !finite_u(u) {
             *s = None;
@@ -92,4 +114,19 @@ pub(crate) fn draw_batch(
                 *o = to_c(*s);
             }
         });
+}
+
+/// [`draw_batch`] for the calls that draw each sample at its own point `u[i]`:
+/// `draw` gets the index range and its points, and draws nothing where a point is
+/// not finite.
+pub(crate) fn draw_batch_at(
+    out: &mut [envlight_sample],
+    u: &[[f32; 2]],
+    draw: impl Fn(std::ops::Range<usize>, &[[f32; 2]], &mut [Option<LightSample>]) + Sync,
+) {
+    draw_batch(out, |range, samples| {
+        let u = &u[range.clone()];
+        draw(range, u, samples);
+        drop_non_finite(samples, u);
+    });
 }

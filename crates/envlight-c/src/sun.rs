@@ -1,9 +1,12 @@
 //! Sun extraction: the map's brightest compact source as a uniform disc, and the
 //! map without it (docs/design.md §6d).
 
-use envlight::{SunExtraction, SunOptions};
+use std::sync::Arc;
 
-use crate::boundary::{cleared, deref, deref_mut, free, put, run, slice_mut, value, Failure};
+use envlight::{EnvironmentLight, SunExtraction, SunOptions};
+
+use crate::boundary::{cleared, deref, deref_mut, free, run, slice_mut, value, Failure};
+use crate::light::new_from_light;
 use crate::{envlight_light, envlight_status};
 
 /// What `envlight_light_extract_sun` found. Opaque and immutable; free it with
@@ -47,29 +50,21 @@ pub extern "C" fn envlight_light_extract_sun(
     light: *const envlight_light,
     out: *mut *mut envlight_sun_extraction,
 ) -> envlight_status {
-    const F: &str = "envlight_light_extract_sun";
-    run(F, || {
-        // SAFETY: by the C contract `out` is NULL or points to a writable
-        // `envlight_sun_extraction *`, and `light` is NULL or a light from
-        // envlight_light_load/_from_rgb not yet freed (only read); the helpers
-        // reject NULL and misaligned pointers.
-        let (out, light) = unsafe {
-            (
-                cleared(out, std::ptr::null_mut(), F, "out")?,
-                deref(light, F, "light")?,
-            )
-        };
-        let extraction = light.light.extract_sun(&SunOptions::default());
-        put(out, envlight_sun_extraction { extraction });
-        Ok(())
-    })
+    let build = |light: &Arc<EnvironmentLight>| -> Result<_, Failure> {
+        let extraction = light.extract_sun(&SunOptions::default());
+        Ok(envlight_sun_extraction { extraction })
+    };
+    // SAFETY: by the C contract `out` is NULL or points to a writable
+    // `envlight_sun_extraction *`, and `light` is NULL or a light from
+    // envlight_light_load/_from_rgb not yet freed (only read).
+    unsafe { new_from_light("envlight_light_extract_sun", light, out, build) }
 }
 
 /// Frees a sun extraction (NULL: nothing).
 #[no_mangle]
 pub extern "C" fn envlight_sun_extraction_free(extraction: *mut envlight_sun_extraction) {
     // SAFETY: by the C contract a non-NULL `extraction` came from
-    // envlight_light_extract_sun (which `put`s an `envlight_sun_extraction`) and is
+    // envlight_light_extract_sun (which makes an `envlight_sun_extraction`) and is
     // freed once.
     unsafe { free(extraction) };
 }

@@ -113,38 +113,48 @@ fn queries_equal_the_library_bit_for_bit() {
     }
 }
 
+/// Each C code indexes the library's list (`ALL`) at its value.
+fn assert_codes<T: PartialEq + std::fmt::Debug>(all: &[T], codes: &[(u32, T)]) {
+    for (code, value) in codes {
+        assert_eq!(&all[*code as usize], value, "code {code}");
+    }
+}
+
 #[test]
 fn enum_codes_follow_the_library_lists() {
     use envlight_density::*;
     use envlight_mapping::*;
     use envlight_sampler::*;
-    assert_eq!(
-        Sampler::ALL[ENVLIGHT_SAMPLER_INVERSION as usize],
-        Sampler::Inversion
+    assert_codes(
+        &Sampler::ALL,
+        &[
+            (ENVLIGHT_SAMPLER_INVERSION as u32, Sampler::Inversion),
+            (ENVLIGHT_SAMPLER_ALIAS as u32, Sampler::Alias),
+            (ENVLIGHT_SAMPLER_HIERARCHICAL as u32, Sampler::Hierarchical),
+        ],
     );
-    assert_eq!(
-        Sampler::ALL[ENVLIGHT_SAMPLER_ALIAS as usize],
-        Sampler::Alias
+    assert_codes(
+        &Density::ALL,
+        &[
+            (
+                ENVLIGHT_DENSITY_PIECEWISE_BILINEAR as u32,
+                Density::PiecewiseBilinear,
+            ),
+            (
+                ENVLIGHT_DENSITY_PIECEWISE_CONSTANT as u32,
+                Density::PiecewiseConstant,
+            ),
+        ],
     );
-    assert_eq!(
-        Sampler::ALL[ENVLIGHT_SAMPLER_HIERARCHICAL as usize],
-        Sampler::Hierarchical
-    );
-    assert_eq!(
-        Density::ALL[ENVLIGHT_DENSITY_PIECEWISE_BILINEAR as usize],
-        Density::PiecewiseBilinear
-    );
-    assert_eq!(
-        Density::ALL[ENVLIGHT_DENSITY_PIECEWISE_CONSTANT as usize],
-        Density::PiecewiseConstant
-    );
-    assert_eq!(
-        Mapping::ALL[ENVLIGHT_MAPPING_EQUIRECTANGULAR as usize],
-        Mapping::Equirectangular
-    );
-    assert_eq!(
-        Mapping::ALL[ENVLIGHT_MAPPING_EQUAL_AREA as usize],
-        Mapping::EqualArea
+    assert_codes(
+        &Mapping::ALL,
+        &[
+            (
+                ENVLIGHT_MAPPING_EQUIRECTANGULAR as u32,
+                Mapping::Equirectangular,
+            ),
+            (ENVLIGHT_MAPPING_EQUAL_AREA as u32, Mapping::EqualArea),
+        ],
     );
     let version =
         format!("{ENVLIGHT_VERSION_MAJOR}.{ENVLIGHT_VERSION_MINOR}.{ENVLIGHT_VERSION_PATCH}");

@@ -31,6 +31,9 @@ fn skip(why: &str) {
     eprintln!("skipping: {why}");
 }
 
+/// The warnings every program and header here is compiled with, as errors.
+const WARNINGS: [&str; 4] = ["-Wall", "-Wextra", "-Werror", "-pedantic"];
+
 fn have(tool: &str) -> bool {
     Command::new(tool).arg("--version").output().is_ok()
 }
@@ -91,38 +94,22 @@ fn build() -> Result<Built, String> {
     // pkg-config: the shared package and the static one.
     for (kind, package) in [("shared", "envlight"), ("static", "envlight-static")] {
         let flags = pc(&["--cflags", "--libs", package]);
-        let c = work.path().join(format!("pc_c_{kind}"));
-        run(Command::new("cc")
-            .args([
-                "-std=c99",
-                "-Wall",
-                "-Wextra",
-                "-Werror",
-                "-pedantic",
-                "-pthread",
-            ])
-            .arg(src.join("rows.c"))
-            .args(&flags)
-            .arg("-o")
-            .arg(&c));
-        programs.insert(format!("pc_c_{kind}"), c);
-        let cpp = work.path().join(format!("pc_cpp_{kind}"));
-        run(Command::new("c++")
-            .args(["-std=c++17", "-Wall", "-Wextra", "-Werror", "-pedantic"])
-            .arg(src.join("rows.cpp"))
-            .args(&flags)
-            .arg("-o")
-            .arg(&cpp));
-        programs.insert(format!("pc_cpp_{kind}"), cpp);
-        let errors = work.path().join(format!("pc_errors_{kind}"));
-        run(Command::new("cc")
-            .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-pedantic"])
-            .arg(src.join("errors.c"))
-            .args(&flags)
-            .arg("-lm")
-            .arg("-o")
-            .arg(&errors));
-        programs.insert(format!("pc_errors_{kind}"), errors);
+        // `compiler std source flags extra -o pc_NAME_KIND`.
+        let mut compile = |name: &str, compiler: &str, std: &str, source: &str, extra: &[&str]| {
+            let exe = work.path().join(format!("pc_{name}_{kind}"));
+            run(Command::new(compiler)
+                .arg(std)
+                .args(WARNINGS)
+                .arg(src.join(source))
+                .args(&flags)
+                .args(extra)
+                .arg("-o")
+                .arg(&exe));
+            programs.insert(format!("pc_{name}_{kind}"), exe);
+        };
+        compile("c", "cc", "-std=c99", "rows.c", &["-pthread"]);
+        compile("cpp", "c++", "-std=c++17", "rows.cpp", &[]);
+        compile("errors", "cc", "-std=c11", "errors.c", &["-lm"]);
     }
     // CMake: find_package(envlight) from the prefix.
     let cmake = work.path().join("cmake");
@@ -433,7 +420,9 @@ fn header_compiles_as_c99_c11_and_cpp17_with_warnings_as_errors() {
     .unwrap();
     for std in ["-std=c99", "-std=c11"] {
         run(Command::new("cc")
-            .args([std, "-Wall", "-Wextra", "-Werror", "-pedantic", "-c"])
+            .arg(std)
+            .args(WARNINGS)
+            .arg("-c")
             .arg("-I")
             .arg(&include)
             .arg(&c)
@@ -447,14 +436,9 @@ fn header_compiles_as_c99_c11_and_cpp17_with_warnings_as_errors() {
     )
     .unwrap();
     run(Command::new("c++")
-        .args([
-            "-std=c++17",
-            "-Wall",
-            "-Wextra",
-            "-Werror",
-            "-pedantic",
-            "-c",
-        ])
+        .arg("-std=c++17")
+        .args(WARNINGS)
+        .arg("-c")
         .arg("-I")
         .arg(&include)
         .arg(&cpp)
@@ -575,9 +559,7 @@ fn docs_code_blocks_build_and_run() {
                 for package in packages {
                     let exe = dir.join(format!("block-{package}"));
                     let mut command = Command::new(compiler);
-                    command
-                        .args([std, "-Wall", "-Wextra", "-Werror", "-pedantic"])
-                        .arg(&source);
+                    command.arg(std).args(WARNINGS).arg(&source);
                     if has_main {
                         command.args(pc(package)).arg("-o").arg(&exe);
                     } else {

@@ -38,6 +38,19 @@ static void expect(const char *what, envlight_status status, envlight_status exp
     }
 }
 
+/* Writes `content` to the file `name` in `dir`, whose path is left in `path` (a
+ * buffer of `size` bytes); 0 when the file cannot be written. */
+static int write_file(char *path, size_t size, const char *dir, const char *name,
+                      const char *content) {
+    FILE *f;
+    snprintf(path, size, "%s/%s", dir, name);
+    f = fopen(path, "wb");
+    if (!f) return 0;
+    fputs(content, f);
+    fclose(f);
+    return 1;
+}
+
 static void check(const char *what, int ok) {
     if (!ok) {
         printf("FAIL %s\n", what);
@@ -54,7 +67,6 @@ int main(int argc, char **argv) {
     char path[4096];
     char tiny[4];
     size_t k;
-    FILE *f;
 
     if (argc < 2) {
         fprintf(stderr, "usage: errors DIR [FILE...]\n");
@@ -70,18 +82,14 @@ int main(int argc, char **argv) {
            envlight_light_load("/nonexistent/dir/missing.exr", NULL, &light),
            ENVLIGHT_ERROR_NOT_FOUND, "/nonexistent/dir/missing.exr");
     check("out is NULL after a failure", light == NULL);
-    snprintf(path, sizeof path, "%s/garbage.exr", argv[1]);
-    f = fopen(path, "wb");
-    if (!f) return 2;
-    fputs("v/1\x01 this is not an OpenEXR file, nor any other map", f);
-    fclose(f);
+    if (!write_file(path, sizeof path, argv[1], "garbage.exr",
+                    "v/1\x01 this is not an OpenEXR file, nor any other map"))
+        return 2;
     expect("garbage file", envlight_light_load(path, NULL, &light), ENVLIGHT_ERROR_FORMAT,
            "garbage.exr");
-    snprintf(path, sizeof path, "%s/truncated.hdr", argv[1]);
-    f = fopen(path, "wb");
-    if (!f) return 2;
-    fputs("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n\x01\x02", f);
-    fclose(f);
+    if (!write_file(path, sizeof path, argv[1], "truncated.hdr",
+                    "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n\x01\x02"))
+        return 2;
     expect("truncated file", envlight_light_load(path, NULL, &light), ENVLIGHT_ERROR_FORMAT,
            "truncated.hdr");
     expect("a directory", envlight_light_load(argv[1], NULL, &light), ENVLIGHT_ERROR_IO, argv[1]);
