@@ -68,6 +68,7 @@ mod sampler;
 mod self_checks;
 mod stats;
 mod suite;
+mod visibility;
 
 pub use checks::black::{black, Black};
 pub use checks::chi_square::{
@@ -88,6 +89,7 @@ pub use portal::{
     Quad, PORTAL_EDGE_BAND,
 };
 pub use product::{product_normals, AtShadingPoint};
+pub use visibility::{AtVisibilityPoint, VisibilityVariant};
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature, FOLD_SPLIT, SPLIT, SPLIT_ANGLE};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};

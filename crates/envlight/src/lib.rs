@@ -59,6 +59,7 @@ pub mod portal;
 pub mod product;
 pub mod rng;
 pub mod sun;
+pub mod visibility;
 mod width;
 
 pub use distribution::{Distribution1D, Distribution2D};
@@ -68,6 +69,7 @@ pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
 pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
+pub use visibility::{VisibilityCache, VisibilityOptions};
 
 /// Whether a table built on first use (inside a `OnceLock`: portal sides, glossy
 /// product tables) may be built in parallel here. Not on a rayon worker: a caller's

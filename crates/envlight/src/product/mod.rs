@@ -68,6 +68,7 @@ mod bright;
 mod export;
 mod factor;
 mod fine;
+pub(crate) mod patches;
 mod pick;
 mod tables;
 #[cfg(test)]

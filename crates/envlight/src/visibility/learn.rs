@@ -1,0 +1,207 @@
+//! Learning each entry's visibility: rays from the entry's points towards the
+//! patches it can face, their transmittance from the renderer's callback, and
+//! the estimates and distribution they give (module docs of
+//! [`crate::visibility`]).
+
+use super::entries::Groups;
+use super::{Entry, VisibilityError, VisibilityOptions};
+use crate::distribution::Distribution1D;
+use crate::math::Vec3;
+use crate::product::ProductSampler;
+use crate::rng::{mix64, SplitMix64};
+
+/// Rays per call of the callback: large enough for a renderer to spread a
+/// batch over its threads, small enough to keep the build's memory flat.
+const BATCH: usize = 1 << 16;
+
+/// The entries learned and the rays traced.
+pub(crate) struct Learned {
+    pub entries: Vec<Entry>,
+    pub rays: u64,
+}
+
+/// An entry while its rays are traced.
+struct Pending {
+    normal: Vec3,
+    cos_spread: f32,
+    /// `C_e[k]`: 0 for a patch it cannot face (or without power).
+    bound: Vec<f32>,
+    /// `Σ t` and `m` per patch.
+    sum: Vec<f32>,
+    count: Vec<u32>,
+}
+
+/// Rays waiting for the callback, and whose they are.
+struct Batch {
+    origins: Vec<Vec3>,
+    directions: Vec<Vec3>,
+    owners: Vec<(u32, u32)>,
+    transmittance: Vec<f32>,
+}
+
+pub(crate) fn learn<E>(
+    product: &ProductSampler,
+    points: &[Vec3],
+    normals: &[Vec3],
+    groups: &Groups,
+    options: &VisibilityOptions,
+    mut trace: impl FnMut(&[Vec3], &[Vec3], &mut [f32]) -> Result<(), E>,
+) -> Result<Learned, VisibilityError<E>> {
+    let patches = product.patches_view();
+    let count = patches.count();
+    let mut pending: Vec<Pending> = groups
+        .iter()
+        .map(|group| {
+            let (normal, cos_spread) = mean_normal(group, normals);
+            let bound = (0..count)
+                .map(|k| {
+                    if patches.power(k) > 0.0 {
+                        patches
+                            .max_dot(k, normal)
+                            .map_or(0.0, |m| cosine_bound(m, cos_spread as f64) as f32)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            Pending {
+                normal,
+                cos_spread,
+                bound,
+                sum: vec![0.0; count],
+                count: vec![0; count],
+            }
+        })
+        .collect();
+
+    let mut batch = Batch {
+        origins: Vec::with_capacity(BATCH),
+        directions: Vec::with_capacity(BATCH),
+        owners: Vec::with_capacity(BATCH),
+        transmittance: vec![0.0; BATCH],
+    };
+    let mut rays = 0u64;
+    for (e, group) in groups.iter().enumerate() {
+        let mut rng = SplitMix64::new(mix64(options.seed ^ mix64(e as u64)));
+        for k in 0..count {
+            if pending[e].bound[k] <= 0.0 {
+                continue;
+            }
+            for _ in 0..options.rays_per_patch {
+                let i = group[(rng.next_u64() % group.len() as u64) as usize] as usize;
+                let xi = [rng.next_f64(), rng.next_f64()];
+                let Some((direction, _)) = patches.sample(k, xi) else {
+                    continue;
+                };
+                // A ray into its own surface says nothing about the sky.
+                if normals[i].dot(direction) <= 0.0 {
+                    continue;
+                }
+                batch.origins.push(points[i]);
+                batch.directions.push(direction);
+                batch.owners.push((e as u32, k as u32));
+                if batch.origins.len() == BATCH {
+                    rays += batch.flush(&mut pending, &mut trace)?;
+                }
+            }
+        }
+    }
+    rays += batch.flush(&mut pending, &mut trace)?;
+
+    let entries = pending
+        .into_iter()
+        .map(|p| finish(p, &patches, options))
+        .collect();
+    Ok(Learned { entries, rays })
+}
+
+impl Batch {
+    /// Traces the rays waiting and adds their transmittance to their entries.
+    fn flush<E>(
+        &mut self,
+        pending: &mut [Pending],
+        trace: &mut impl FnMut(&[Vec3], &[Vec3], &mut [f32]) -> Result<(), E>,
+    ) -> Result<u64, VisibilityError<E>> {
+        let n = self.origins.len();
+        if n == 0 {
+            return Ok(0);
+        }
+        let out = &mut self.transmittance[..n];
+        out.fill(f32::NAN);
+        trace(&self.origins, &self.directions, out).map_err(VisibilityError::Trace)?;
+        for (ray, (&t, &(e, k))) in out.iter().zip(&self.owners).enumerate() {
+            if !(0.0..=1.0).contains(&t) {
+                return Err(VisibilityError::Transmittance {
+                    ray,
+                    batch: n,
+                    value: t,
+                });
+            }
+            let p = &mut pending[e as usize];
+            p.sum[k as usize] += t;
+            p.count[k as usize] += 1;
+        }
+        self.origins.clear();
+        self.directions.clear();
+        self.owners.clear();
+        Ok(n as u64)
+    }
+}
+
+/// The entry of `p`: `V̂ = (Σ t + a) / (m + a)`, `W = V̂ P_k C_e[k]`, and the
+/// learned share where any weight is positive.
+fn finish(
+    p: Pending,
+    patches: &crate::product::patches::Patches<'_>,
+    options: &VisibilityOptions,
+) -> Entry {
+    let a = options.prior;
+    let visibility: Vec<f32> = p
+        .sum
+        .iter()
+        .zip(&p.count)
+        .map(|(&s, &m)| (s + a) / (m as f32 + a))
+        .collect();
+    let weights: Vec<f32> = (0..visibility.len())
+        .map(|k| (visibility[k] as f64 * patches.power(k) * p.bound[k] as f64) as f32)
+        .collect();
+    let distribution = Distribution1D::new(&weights);
+    let share = if distribution.integral() > 0.0 {
+        options.learned_share
+    } else {
+        0.0
+    };
+    Entry {
+        normal: p.normal,
+        cos_spread: p.cos_spread,
+        share,
+        visibility,
+        patches: distribution,
+    }
+}
+
+/// The unit mean of the group's normals and the cosine of the widest angle
+/// between it and one of them.
+fn mean_normal(group: &[u32], normals: &[Vec3]) -> (Vec3, f32) {
+    let sum = group
+        .iter()
+        .fold(Vec3::new(0.0, 0.0, 0.0), |s, &i| s + normals[i as usize]);
+    let mean = sum.normalized().unwrap_or(normals[group[0] as usize]);
+    let spread = group
+        .iter()
+        .map(|&i| normals[i as usize].dot(mean))
+        .fold(1.0f32, f32::min);
+    (mean, spread.clamp(-1.0, 1.0))
+}
+
+/// An upper bound of `n·ω` over normals `n` within angle `β` of the mean and
+/// directions `ω` at least angle `γ` from it, given `cos γ ≥ m` (the patch's
+/// bound) and `cos β`: `cos(max(0, γ - β))`, 0 when that is not positive.
+fn cosine_bound(m: f64, cos_spread: f64) -> f64 {
+    if m >= cos_spread {
+        return 1.0;
+    }
+    let (m, c) = (m.clamp(-1.0, 1.0), cos_spread);
+    let (sin_gamma, sin_beta) = ((1.0 - m * m).max(0.0).sqrt(), (1.0 - c * c).max(0.0).sqrt());
+    (m * c + sin_gamma * sin_beta).max(0.0)
+}
