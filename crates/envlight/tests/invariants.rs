@@ -585,18 +585,24 @@ fn broken_pdf_lookup_is_rejected() {
             Rotation::about_z_degrees(-degrees).apply(d)
         },
     };
-    let n = verify::normalisation(&s);
-    let c = verify::consistency(&s, 200_000, 26, verify::PDF_CONSISTENCY_TOLERANCE);
-    let chi = verify::chi_square(&s, 1_000_000, 27, 40_000);
+    assert_pdf_elsewhere_rejected(&s, 26);
+}
+
+/// Rejects `s` by its pdf() alone: normalisation cannot see a pdf that answers
+/// for the wrong direction (it still integrates to 1), but it no longer matches
+/// the samples: consistency (200k samples, `seed`) fails on more than half of
+/// them and chi-square (1M samples, `seed + 1`, α = 1e-3) rejects.
+fn assert_pdf_elsewhere_rejected(s: &PdfElsewhere, seed: u64) {
+    let n = verify::normalisation(s);
+    let c = verify::consistency(s, 200_000, seed, verify::PDF_CONSISTENCY_TOLERANCE);
+    let chi = verify::chi_square(s, 1_000_000, seed + 1, 40_000);
     println!("[{}]\n  {n}\n  {c}\n  {chi}", s.name());
-    // A shifted pdf still integrates to 1: normalisation cannot see it ...
     assert!(n.verdict(false).is_ok(), "{n}");
-    // ... but it no longer matches the samples.
     assert!(
         c.verdict().is_err() && c.pdf_failures > c.checked / 2,
         "{c}"
     );
-    assert!(chi.p_value < ALPHA, "{chi}");
+    assert!(chi.p_value < ALPHA && chi.verdict().is_err(), "{chi}");
 }
 
 #[test]
@@ -623,16 +629,7 @@ fn broken_equal_area_samplers_are_rejected() {
             0.0,
         ),
     };
-    let n = verify::normalisation(&s);
-    let c = verify::consistency(&s, 200_000, 28, verify::PDF_CONSISTENCY_TOLERANCE);
-    let chi = verify::chi_square(&s, 1_000_000, 29, 40_000);
-    println!("[{}]\n  {n}\n  {c}\n  {chi}", s.name());
-    assert!(n.verdict(false).is_ok(), "{n}");
-    assert!(
-        c.verdict().is_err() && c.pdf_failures > c.checked / 2,
-        "{c}"
-    );
-    assert!(chi.p_value < ALPHA && chi.verdict().is_err(), "{chi}");
+    assert_pdf_elsewhere_rejected(&s, 28);
 
     // The lat-long Jacobian: ∫p = 0.795, chi-square (1M samples, α = 1e-3) p ≈ 0,
     // and the f = 1 estimate (1M samples) 470 standard errors high.
