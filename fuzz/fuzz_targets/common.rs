@@ -1,6 +1,20 @@
 // Shared by the loader targets and crates/envlight/tests/fuzz_regressions.rs
 // (included with `include!`): decode `bytes` under a
 // small texel limit and check what a successful load promises.
+/// What each loader target puts before the fuzzer's bytes (`ANY`: nothing, the
+/// loader guesses): a format's magic number, or enough of it to pick the format.
+#[allow(dead_code)]
+mod prefix {
+    pub const ANY: &[u8] = b"";
+    pub const HDR: &[u8] = b"#?RADIANCE\n";
+    pub const EXR: &[u8] = &[0x76, 0x2f, 0x31, 0x01];
+    pub const PFM: &[u8] = b"P";
+    pub const PNG: &[u8] = &[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+    pub const JPEG: &[u8] = &[0xff, 0xd8, 0xff];
+    /// Every one of them (the regression replay tries each).
+    pub const ALL: [&[u8]; 6] = [ANY, HDR, EXR, PFM, PNG, JPEG];
+}
+
 #[allow(dead_code)]
 fn check_load(prefix: &[u8], data: &[u8]) {
     tolerate_caught_dependency_panics();

@@ -1,3 +1,3 @@
 #![no_main]
 include!("common.rs");
-libfuzzer_sys::fuzz_target!(|data: &[u8]| check_load(b"#?RADIANCE\n", data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| check_load(prefix::HDR, data));

@@ -7,8 +7,8 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
         None => return,
     };
     if png {
-        check_load(&[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a], rest)
+        check_load(prefix::PNG, rest)
     } else {
-        check_load(&[0xff, 0xd8, 0xff], rest)
+        check_load(prefix::JPEG, rest)
     }
 });

@@ -6,11 +6,14 @@
 //! `cargo bench -p envlight --bench light -- sample`.
 
 mod baseline;
+#[path = "../examples/common/queries.rs"]
+mod queries;
 
 use baseline::BaselineLight;
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
 use envlight::light::{Density, Sampler};
-use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Lookup, Vec3};
+use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Lookup};
+use queries::{fold, sample_all};
 use std::hint::black_box;
 use std::sync::OnceLock;
 
@@ -36,40 +39,18 @@ fn light(width: usize, lookup: Lookup, sampler: Sampler) -> EnvironmentLight {
     EnvironmentLight::new(sky(width).clone(), options).unwrap()
 }
 
-/// Every output of a sample folded into one number, so the benchmark cannot skip
-/// computing any of them (summing only the pdf let the compiler drop the radiance
-/// lookup and the direction).
-fn checksum(s: envlight::LightSample) -> f32 {
-    s.pdf
-        + s.direction.x
-        + s.direction.y
-        + s.direction.z
-        + s.radiance[0]
-        + s.radiance[1]
-        + s.radiance[2]
-}
-
-/// [`checksum`] for the baseline's `(direction, pdf, radiance)`.
-fn baseline_checksum(s: (Vec3, f32, [f32; 3])) -> f32 {
-    let (d, pdf, l) = s;
-    pdf + d.x + d.y + d.z + l[0] + l[1] + l[2]
+/// [`sample_all`] for the baseline.
+fn baseline_sample_all(base: &BaselineLight, xi: &[[f32; 2]]) -> f32 {
+    xi.iter()
+        .map(|&x| {
+            base.sample(black_box(x))
+                .map_or(0.0, |(d, p, l)| fold(d, p, l))
+        })
+        .sum()
 }
 
 const QUERIES: usize = 4096;
 const COLD_QUERIES: usize = 1 << 20;
-
-fn random_xi() -> Vec<[f32; 2]> {
-    (0..QUERIES as u64)
-        .map(|k| envlight::rng::xi_2d(99, k))
-        .collect()
-}
-
-fn random_directions() -> Vec<Vec3> {
-    random_xi()
-        .into_iter()
-        .map(envlight::math::uniform_sphere)
-        .collect()
-}
 
 fn bench_build(c: &mut Criterion) {
     let mut group = c.benchmark_group("build");
@@ -117,8 +98,8 @@ fn bench_build(c: &mut Criterion) {
 }
 
 fn bench_queries(c: &mut Criterion) {
-    let xi = random_xi();
-    let dirs = random_directions();
+    let xi = queries::xi(99, QUERIES);
+    let dirs = queries::directions(&xi);
     let width = 4096;
     let base = BaselineLight::new(sky(width).clone());
     let lights = [
@@ -135,33 +116,15 @@ fn bench_queries(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("sample");
     group.throughput(Throughput::Elements(QUERIES as u64));
-    group.bench_function("baseline", |b| {
-        b.iter(|| {
-            xi.iter()
-                .map(|&x| base.sample(black_box(x)).map_or(0.0, baseline_checksum))
-                .sum::<f32>()
-        })
-    });
+    group.bench_function("baseline", |b| b.iter(|| baseline_sample_all(&base, &xi)));
     for (name, l) in &lights {
-        group.bench_function(*name, |b| {
-            b.iter(|| {
-                xi.iter()
-                    .map(|&x| l.sample(black_box(x)).map_or(0.0, checksum))
-                    .sum::<f32>()
-            })
-        });
+        group.bench_function(*name, |b| b.iter(|| sample_all(l, &xi)));
     }
     group.bench_function("envlight-alias-bilinear", |b| {
-        b.iter(|| {
-            xi.iter()
-                .map(|&x| alias.sample(black_box(x)).map_or(0.0, checksum))
-                .sum::<f32>()
-        })
+        b.iter(|| sample_all(&alias, &xi))
     });
     let mut out = vec![None; QUERIES * 64];
-    let many: Vec<[f32; 2]> = (0..out.len() as u64)
-        .map(|k| envlight::rng::xi_2d(5, k))
-        .collect();
+    let many = queries::xi(5, out.len());
     group.throughput(Throughput::Elements(out.len() as u64));
     group.bench_function("envlight-batch-all-threads", |b| {
         b.iter(|| lights[0].1.sample_batch(black_box(&many), &mut out))
@@ -178,25 +141,13 @@ fn bench_queries(c: &mut Criterion) {
     // Cold caches: a million fresh ξ per pass, so each query touches parts of the
     // map's data (48 MB of CDFs and 100 MB of texels for the baseline) that no
     // recent query brought in, as in a renderer whose samples wander the map.
-    let cold: Vec<[f32; 2]> = (0..COLD_QUERIES as u64)
-        .map(|k| envlight::rng::xi_2d(77, k))
-        .collect();
+    let cold = queries::xi(77, COLD_QUERIES);
     let mut group = c.benchmark_group("sample-cold");
     group.sample_size(10);
     group.throughput(Throughput::Elements(COLD_QUERIES as u64));
-    group.bench_function("baseline", |b| {
-        b.iter(|| {
-            cold.iter()
-                .map(|&x| base.sample(black_box(x)).map_or(0.0, baseline_checksum))
-                .sum::<f32>()
-        })
-    });
+    group.bench_function("baseline", |b| b.iter(|| baseline_sample_all(&base, &cold)));
     group.bench_function("envlight-bilinear", |b| {
-        b.iter(|| {
-            cold.iter()
-                .map(|&x| lights[0].1.sample(black_box(x)).map_or(0.0, checksum))
-                .sum::<f32>()
-        })
+        b.iter(|| sample_all(&lights[0].1, &cold))
     });
     group.finish();
 

@@ -57,6 +57,25 @@ fn timed_if(timed: bool, runs: &mut [&mut dyn FnMut()]) -> Vec<(f64, f64)> {
     vec![(f64::NAN, f64::NAN); runs.len()]
 }
 
+/// [`timed_if`] of one batch call per light: `call(k, light, out)` writes what
+/// `lights[k]` gives into `outs[k]`.
+fn time_batches<T>(
+    timed: bool,
+    lights: &[EnvironmentLight],
+    outs: &mut [T],
+    call: impl Fn(usize, &EnvironmentLight, &mut T),
+) -> Vec<(f64, f64)> {
+    let call = &call;
+    let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
+    for (k, (light, out)) in lights.iter().zip(outs.iter_mut()).enumerate() {
+        runs.push(Box::new(move || call(k, light, out)));
+    }
+    timed_if(
+        timed,
+        &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
+    )
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut widths: Vec<usize> = args.iter().filter_map(|s| s.parse().ok()).collect();
@@ -109,16 +128,9 @@ fn main() {
             })
             .collect();
         let mut samples: Vec<Vec<Option<LightSample>>> = vec![vec![None; N]; lights.len()];
-        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
-        for (light, out) in lights.iter().zip(samples.iter_mut()) {
-            let xi = &xi;
-            runs.push(Box::new(move || light.sample_batch(xi, out)));
-        }
-        let sample = timed_if(
-            timed("sample"),
-            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
-        );
-        drop(runs);
+        let sample = time_batches(timed("sample"), &lights, &mut samples, |_, light, out| {
+            light.sample_batch(&xi, out)
+        });
         // Each density's own samples are its pdf and radiance queries.
         let dirs: Vec<Vec<Vec3>> = samples
             .iter()
@@ -129,25 +141,16 @@ fn main() {
             })
             .collect();
         let mut pdfs = vec![vec![0.0f32; N]; lights.len()];
-        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
-        for ((light, out), d) in lights.iter().zip(pdfs.iter_mut()).zip(&dirs) {
-            runs.push(Box::new(move || light.pdf_batch(d, out)));
-        }
-        let pdf = timed_if(
-            timed("pdf"),
-            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
-        );
-        drop(runs);
+        let pdf = time_batches(timed("pdf"), &lights, &mut pdfs, |k, light, out| {
+            light.pdf_batch(&dirs[k], out)
+        });
         let mut radiance = vec![vec![[0.0f32; 3]; N]; lights.len()];
-        let mut runs: Vec<Box<dyn FnMut() + '_>> = Vec::new();
-        for ((light, out), d) in lights.iter().zip(radiance.iter_mut()).zip(&dirs) {
-            runs.push(Box::new(move || light.radiance_batch(d, out)));
-        }
-        let rad = timed_if(
+        let rad = time_batches(
             timed("radiance"),
-            &mut runs.iter_mut().map(|r| &mut **r as _).collect::<Vec<_>>(),
+            &lights,
+            &mut radiance,
+            |k, light, out| light.radiance_batch(&dirs[k], out),
         );
-        drop(runs);
         let cell = |(best, ratio): (f64, f64)| format!("{best:.1} [{ratio:.2}×]");
         for (k, density) in densities.iter().enumerate() {
             println!(

@@ -20,7 +20,8 @@
 use envlight::light::Density;
 use envlight::load::{load, LoadOptions};
 use envlight::{
-    builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3,
+    builtin, EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, ShadingPoint,
+    Vec3,
 };
 use std::hint::black_box;
 use std::sync::Arc;
@@ -31,6 +32,25 @@ const ROUNDS: usize = 7;
 
 fn best(mut f: impl FnMut() -> f64) -> f64 {
     (0..ROUNDS).map(|_| f()).fold(f64::INFINITY, f64::min)
+}
+
+/// ns per shading point, the best of `ROUNDS`: at each ξ of `xi`, `point` set to
+/// `factor(k)` (the k-th ξ's), one sample and its pdf.
+fn sample_pdf<'f>(
+    point: &mut ShadingPoint,
+    xi: &[[f32; 2]],
+    factor: impl Fn(usize) -> &'f Factor,
+) -> f64 {
+    best(|| {
+        let start = Instant::now();
+        for (k, x) in xi.iter().enumerate() {
+            point.set_factor(factor(k));
+            if let Some(s) = point.sample(*x) {
+                black_box(point.pdf(s.direction));
+            }
+        }
+        start.elapsed().as_secs_f64() * 1e9 / xi.len() as f64
+    })
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -98,26 +118,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let sampler = ProductSampler::new(light.clone(), options);
         let build_ms = started.elapsed().as_secs_f64() * 1e3;
         let mut point = sampler.at(&factors[0]);
-        let fresh = best(|| {
-            let start = Instant::now();
-            for (f, x) in factors.iter().zip(&xi) {
-                point.set_factor(f);
-                if let Some(s) = point.sample(*x) {
-                    black_box(point.pdf(s.direction));
-                }
-            }
-            per_point(start)
-        });
-        let reused = best(|| {
-            let start = Instant::now();
-            for (k, x) in xi.iter().enumerate() {
-                point.set_factor(&factors[k / 16]);
-                if let Some(s) = point.sample(*x) {
-                    black_box(point.pdf(s.direction));
-                }
-            }
-            per_point(start)
-        });
+        let fresh = sample_pdf(&mut point, &xi, |k| &factors[k]);
+        let reused = sample_pdf(&mut point, &xi, |k| &factors[k / 16]);
         let mut out = vec![None; POINTS];
         let mut pdfs = vec![0.0f32; POINTS];
         let batch = best(|| {
@@ -160,16 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let started = Instant::now();
         point.set_factor(&glossy[0]);
         let build_ms = started.elapsed().as_secs_f64() * 1e3;
-        let fresh = best(|| {
-            let start = Instant::now();
-            for (f, x) in glossy.iter().zip(&xi) {
-                point.set_factor(f);
-                if let Some(s) = point.sample(*x) {
-                    black_box(point.pdf(s.direction));
-                }
-            }
-            per_point(start)
-        });
+        let fresh = sample_pdf(&mut point, &xi, |k| &glossy[k]);
         println!(
             "glossy alpha {alpha}: tables built on first use in {build_ms:.0} ms; \
              product at + sample + pdf {fresh:.0} ns ({:.1}x light sample)",

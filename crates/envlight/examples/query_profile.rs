@@ -7,6 +7,10 @@
 //! folded into the printed sum so that none of it can be skipped. `build` times N
 //! builds of the sky (N small) and prints the best.
 
+#[allow(dead_code)] // query_ratios and the benches use more of it than this does
+#[path = "common/queries.rs"]
+mod queries;
+
 use envlight::{builtin, EnvironmentLight, LightOptions, Vec3};
 use std::hint::black_box;
 
@@ -39,13 +43,8 @@ fn main() {
         EnvironmentLight::new(sky, LightOptions::default()).expect("the built-in sky builds");
     let hot = args.next().as_deref() == Some("hot");
     let distinct = if hot { n.min(4096) } else { n };
-    let xi: Vec<[f32; 2]> = (0..distinct as u64)
-        .map(|k| envlight::rng::xi_2d(1, k))
-        .collect();
-    let directions: Vec<Vec3> = xi
-        .iter()
-        .map(|&x| envlight::math::uniform_sphere(x))
-        .collect();
+    let xi = queries::xi(1, distinct);
+    let directions = queries::directions(&xi);
     if let Some(batch) = what.strip_suffix("-batch") {
         // `pdf-batch` / `radiance-batch`: the batch calls over the queries, N in all.
         let started = std::time::Instant::now();
@@ -89,15 +88,7 @@ fn one_build(image: envlight::EnvImage) -> EnvironmentLight {
 
 #[inline(never)]
 fn one_sample(light: &EnvironmentLight, xi: [f32; 2]) -> f32 {
-    light.sample(xi).map_or(0.0, |s| {
-        s.pdf
-            + s.direction.x
-            + s.direction.y
-            + s.direction.z
-            + s.radiance[0]
-            + s.radiance[1]
-            + s.radiance[2]
-    })
+    light.sample(xi).map_or(0.0, queries::fold_sample)
 }
 
 #[inline(never)]

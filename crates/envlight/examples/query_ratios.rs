@@ -16,6 +16,8 @@
 #[allow(dead_code)] // the benches use more of the baseline than this does
 #[path = "../benches/baseline/mod.rs"]
 mod baseline;
+#[path = "common/queries.rs"]
+mod queries;
 
 use baseline::BaselineLight;
 use envlight::{builtin, EnvironmentLight, LightOptions, Lookup, Vec3};
@@ -27,21 +29,8 @@ const QUERIES: usize = 4096;
 /// One timed pass over the queries, returning a checksum.
 type Run<'a> = Box<dyn Fn() -> f32 + Sync + 'a>;
 
-/// Every output of each sample folded into one number, so none can be skipped.
-fn fold(d: Vec3, pdf: f32, l: [f32; 3]) -> f32 {
-    pdf + d.x + d.y + d.z + l[0] + l[1] + l[2]
-}
-
 fn samples<'a>(light: &'a EnvironmentLight, xi: &'a [[f32; 2]]) -> Run<'a> {
-    Box::new(move || {
-        xi.iter()
-            .map(|&x| {
-                light
-                    .sample(black_box(x))
-                    .map_or(0.0, |s| fold(s.direction, s.pdf, s.radiance))
-            })
-            .sum()
-    })
+    Box::new(move || queries::sample_all(light, xi))
 }
 
 fn radiance<'a>(light: &'a EnvironmentLight, dirs: &'a [Vec3]) -> Run<'a> {
@@ -62,13 +51,8 @@ fn main() {
         EnvironmentLight::new(sky.clone(), options).expect("the built-in sky builds")
     };
     let (bilinear, nearest) = (light(Lookup::Bilinear), light(Lookup::Nearest));
-    let xi: Vec<[f32; 2]> = (0..QUERIES as u64)
-        .map(|k| envlight::rng::xi_2d(99, k))
-        .collect();
-    let dirs: Vec<Vec3> = xi
-        .iter()
-        .map(|&x| envlight::math::uniform_sphere(x))
-        .collect();
+    let xi = queries::xi(99, QUERIES);
+    let dirs = queries::directions(&xi);
 
     println!(
         "{width}x{} sky, {rounds} rounds of {QUERIES} warm queries; ns per query",
@@ -83,11 +67,12 @@ fn main() {
             xi.iter()
                 .map(|&x| {
                     base.sample(black_box(x))
-                        .map_or(0.0, |(d, p, l)| fold(d, p, l))
+                        .map_or(0.0, |(d, p, l)| queries::fold(d, p, l))
                 })
                 .sum()
         })
     };
+    let base_pdf = || -> Run { Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()) };
     let base_radiance =
         || -> Run { Box::new(|| dirs.iter().map(|&d| base.radiance(black_box(d))[1]).sum()) };
     let cases: Vec<(&str, Run, Run)> = vec![
@@ -95,7 +80,7 @@ fn main() {
         ("sample (nearest)", base_samples(), samples(&nearest, &xi)),
         (
             "pdf",
-            Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()),
+            base_pdf(),
             Box::new(|| dirs.iter().map(|&d| bilinear.pdf(black_box(d))).sum()),
         ),
         (
@@ -120,7 +105,7 @@ fn main() {
         ),
         (
             "pdf, batch",
-            Box::new(|| dirs.iter().map(|&d| base.pdf(black_box(d))).sum()),
+            base_pdf(),
             Box::new(|| {
                 let mut out = vec![0.0f32; dirs.len()];
                 bilinear.pdf_batch(black_box(&dirs), &mut out);

@@ -42,16 +42,9 @@ fn distribution_regressions() {
 #[test]
 fn load_regressions() {
     // Replayed under every prefix the loader targets use.
-    let prefixes: [&[u8]; 5] = [
-        b"",
-        b"#?RADIANCE\n",
-        &[0x76, 0x2f, 0x31, 0x01],
-        b"P",
-        &[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a],
-    ];
     for (path, bytes) in inputs("load") {
         println!("replaying {}", path.display());
-        for prefix in prefixes {
+        for prefix in prefix::ALL {
             check_load(prefix, &bytes);
         }
     }

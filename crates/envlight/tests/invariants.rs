@@ -10,12 +10,13 @@
 //! The `broken_*` tests wrap the light in deliberately wrong samplers and assert that
 //! the harness rejects each of them: they prove the checks can fail.
 
+mod common;
+
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Vec3};
 use envlight_verify::maps::{black, constant, gradient, hot, huge_range, random};
 use envlight_verify::{
     self as verify, Config, Grid, Integrand, SphereSample, SphereSampler, ALPHA,
 };
-use std::path::{Path, PathBuf};
 
 // ---------------------------------------------------------------------------
 // Lights over the synthetic maps of `envlight_verify::maps`.
@@ -98,104 +99,92 @@ const HUGE_RANGE: Config = Config {
     ..Config::SYNTHETIC
 };
 
-/// One `#[test]` per line: `name: sampler, config;`.
+/// The lookup a test is named after.
+macro_rules! lookup {
+    (nearest) => {
+        Nearest
+    };
+    (bilinear) => {
+        Bilinear
+    };
+    (node) => {
+        Node
+    };
+}
+
+/// One module per line, `name: |lookup| light, config, [lookups];`, and in it one
+/// `#[test]` per lookup listed: `constant::nearest`, `constant::bilinear`, ...
 macro_rules! invariant_cases {
-    ($($name:ident: $sampler:expr, $cfg:expr;)*) => {$(
-        #[test]
-        fn $name() {
-            let sampler = $sampler;
-            verify::assert_invariants(stringify!($name), &sampler, &Integrand::luminance(), &$cfg);
+    ($($name:ident: $light:expr, $cfg:expr, [$($lookup:ident),+];)*) => {$(
+        mod $name {
+            use super::*;
+            $(
+                #[test]
+                fn $lookup() {
+                    let sampler = ($light)(lookup!($lookup));
+                    let case = concat!(stringify!($name), "::", stringify!($lookup));
+                    verify::assert_invariants(case, &sampler, &Integrand::luminance(), &$cfg);
+                }
+            )+
         }
     )*};
 }
 
 invariant_cases! {
-    constant_nearest:              light(constant(64, 32), Nearest), FULL;
-    constant_bilinear:             light(constant(64, 32), Bilinear), FULL;
-    gradient_nearest:              light(gradient(64, 32), Nearest), FULL;
-    gradient_bilinear:             light(gradient(64, 32), Bilinear), FULL;
-    hot_middle_nearest:            light(hot(64, 32, 27, 13), Nearest), FULL;
-    hot_middle_bilinear:           light(hot(64, 32, 27, 13), Bilinear), FULL;
-    hot_top_row_nearest:           light(hot(64, 32, 20, 0), Nearest), FULL;
-    hot_top_row_bilinear:          light(hot(64, 32, 20, 0), Bilinear), FULL;
-    hot_bottom_row_nearest:        light(hot(64, 32, 41, 31), Nearest), FULL;
-    hot_bottom_row_bilinear:       light(hot(64, 32, 41, 31), Bilinear), FULL;
-    hot_seam_first_col_nearest:    light(hot(64, 32, 0, 10), Nearest), FULL;
-    hot_seam_first_col_bilinear:   light(hot(64, 32, 0, 10), Bilinear), FULL;
-    hot_seam_last_col_nearest:     light(hot(64, 32, 63, 20), Nearest), FULL;
-    hot_seam_last_col_bilinear:    light(hot(64, 32, 63, 20), Bilinear), FULL;
-    random_91x37_nearest:          light(random(91, 37, 91), Nearest), FULL;
-    random_91x37_bilinear:         light(random(91, 37, 91), Bilinear), FULL;
-    one_texel_nearest:             light(constant(1, 1), Nearest), FULL;
-    one_texel_bilinear:            light(constant(1, 1), Bilinear), FULL;
-    wide_16384x1_nearest:          light(gradient(16384, 1), Nearest), FULL;
-    wide_16384x1_bilinear:         light(gradient(16384, 1), Bilinear), FULL;
-    tall_1x4096_nearest:           light(gradient(1, 4096), Nearest), FULL;
-    tall_1x4096_bilinear:          light(gradient(1, 4096), Bilinear), FULL;
-    huge_range_nearest:            light(huge_range(32, 16), Nearest), HUGE_RANGE;
-    huge_range_bilinear:           light(huge_range(32, 16), Bilinear), HUGE_RANGE;
-    rotated_random_nearest:        rotated(random(48, 24, 7), Nearest, 37.0), FULL;
-    rotated_random_bilinear:       rotated(random(48, 24, 7), Bilinear, 37.0), FULL;
-    rotated_hot_seam_bilinear:     rotated(hot(64, 32, 63, 9), Bilinear, 37.0), FULL;
-    builtin_sky_bilinear:          light(envlight::builtin::sky(256, 128), Bilinear), FULL;
+    constant:             |l| light(constant(64, 32), l), FULL, [nearest, bilinear, node];
+    gradient:             |l| light(gradient(64, 32), l), FULL, [nearest, bilinear, node];
+    hot_middle:           |l| light(hot(64, 32, 27, 13), l), FULL, [nearest, bilinear, node];
+    hot_top_row:          |l| light(hot(64, 32, 20, 0), l), FULL, [nearest, bilinear, node];
+    hot_bottom_row:       |l| light(hot(64, 32, 41, 31), l), FULL, [nearest, bilinear, node];
+    hot_seam_first_col:   |l| light(hot(64, 32, 0, 10), l), FULL, [nearest, bilinear];
+    hot_seam_last_col:    |l| light(hot(64, 32, 63, 20), l), FULL, [nearest, bilinear, node];
+    random_91x37:         |l| light(random(91, 37, 91), l), FULL, [nearest, bilinear, node];
+    one_texel:            |l| light(constant(1, 1), l), FULL, [nearest, bilinear, node];
+    wide_16384x1:         |l| light(gradient(16384, 1), l), FULL, [nearest, bilinear, node];
+    tall_1x4096:          |l| light(gradient(1, 4096), l), FULL, [nearest, bilinear, node];
+    huge_range:           |l| light(huge_range(32, 16), l), HUGE_RANGE, [nearest, bilinear, node];
+    rotated_random:       |l| rotated(random(48, 24, 7), l, 37.0), FULL, [nearest, bilinear, node];
+    rotated_hot_seam:     |l| rotated(hot(64, 32, 63, 9), l, 37.0), FULL, [bilinear];
+    builtin_sky:          |l| light(envlight::builtin::sky(256, 128), l), FULL, [bilinear, node];
     // The node lookup (Mitsuba envmap's rows as nodes from pole to pole) and the
-    // importance that follows it: every check, the edge rows and the seam included.
-    constant_node:                 light(constant(64, 32), Node), FULL;
-    gradient_node:                 light(gradient(64, 32), Node), FULL;
-    hot_middle_node:               light(hot(64, 32, 27, 13), Node), FULL;
-    hot_top_row_node:              light(hot(64, 32, 20, 0), Node), FULL;
-    hot_bottom_row_node:           light(hot(64, 32, 41, 31), Node), FULL;
-    hot_second_row_node:           light(hot(64, 32, 5, 1), Node), FULL;
-    hot_seam_last_col_node:        light(hot(64, 32, 63, 20), Node), FULL;
-    random_91x37_node:             light(random(91, 37, 91), Node), FULL;
-    two_rows_node:                 light(random(16, 2, 4), Node), FULL;
-    one_texel_node:                light(constant(1, 1), Node), FULL;
-    wide_16384x1_node:             light(gradient(16384, 1), Node), FULL;
-    tall_1x4096_node:              light(gradient(1, 4096), Node), FULL;
-    huge_range_node:               light(huge_range(32, 16), Node), HUGE_RANGE;
-    rotated_random_node:           rotated(random(48, 24, 7), Node, 37.0), FULL;
-    builtin_sky_node:              light(envlight::builtin::sky(256, 128), Node), FULL;
-    alias_hot_top_row_node:        combo(hot(64, 32, 20, 0), Node, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    hierarchical_hot_seam_node:    combo(hot(64, 32, 63, 20), Node, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    table_quarter_hot_top_row_node: table(hot(64, 32, 21, 0), Node, Inversion, 16), FULL;
-    // The node lookup with the piecewise-bilinear density (nodes on its rows, pole
+    // importance that follows it: every check, the edge rows and the seam included
+    // (with the maps above, and these).
+    hot_second_row:       |l| light(hot(64, 32, 5, 1), l), FULL, [node];
+    two_rows:             |l| light(random(16, 2, 4), l), FULL, [node];
+    // The piecewise-bilinear density (with the node lookup, nodes on its rows, pole
     // to pole): two rows (both poles), odd sides, hot pole rows, rotated.
-    bilinear_density_random_node:       combo(random(91, 37, 91), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_two_rows_node:     combo(random(16, 2, 4), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_three_rows_node:   combo(random(5, 3, 8), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_top_row_node:  combo(hot(64, 32, 20, 0), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_bottom_node:   combo(hot(63, 33, 41, 32), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_second_node:   combo(hot(64, 32, 5, 1), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_seam_node:     combo(hot(64, 32, 63, 20), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
-    bilinear_density_one_row_node:      combo(gradient(64, 1), Node, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_rotated_sky_node:  combo(envlight::builtin::sky(256, 128), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
-    bilinear_density_rotated_random_node: combo(random(48, 24, 7), Node, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
-    // The same importance through other samplers of the grid (one line each).
-    alias_random_bilinear:         combo(random(91, 37, 91), Bilinear, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    alias_hot_top_row_nearest:     combo(hot(64, 32, 20, 0), Nearest, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    alias_rotated_sky:             combo(envlight::builtin::sky(256, 128), Bilinear, Alias, PiecewiseConstant, Equirectangular, 37.0), FULL;
-    hierarchical_random_bilinear:  combo(random(91, 37, 91), Bilinear, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    hierarchical_hot_seam_nearest: combo(hot(64, 32, 63, 20), Nearest, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
-    hierarchical_rotated_sky:      combo(envlight::builtin::sky(256, 128), Bilinear, Hierarchical, PiecewiseConstant, Equirectangular, 37.0), FULL;
-    bilinear_density_random:       combo(random(91, 37, 91), Bilinear, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_seam:     combo(hot(64, 32, 63, 20), Bilinear, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_hot_top_row:  combo(hot(64, 32, 20, 0), Bilinear, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    bilinear_density_rotated_sky:  combo(envlight::builtin::sky(256, 128), Bilinear, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL;
-    bilinear_density_nearest:      combo(random(91, 37, 91), Nearest, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL;
-    equal_area_random:             combo(random(91, 37, 91), Bilinear, Inversion, PiecewiseConstant, EqualArea, 0.0), FULL;
-    equal_area_sky_nearest:        combo(envlight::builtin::sky(256, 128), Nearest, Inversion, PiecewiseConstant, EqualArea, 37.0), FULL;
-    equal_area_alias_sky:          combo(envlight::builtin::sky(256, 128), Bilinear, Alias, PiecewiseConstant, EqualArea, 0.0), FULL;
-    equal_area_hierarchical_hot:   combo(hot(64, 32, 20, 3), Bilinear, Hierarchical, PiecewiseConstant, EqualArea, 0.0), FULL;
-    equal_area_bilinear_sky:       combo(envlight::builtin::sky(256, 128), Bilinear, Inversion, PiecewiseBilinear, EqualArea, 0.0), FULL;
-    hierarchical_wide_16384x1:     combo(gradient(16384, 1), Bilinear, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL;
+    bilinear_density_random:          |l| combo(random(91, 37, 91), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [nearest, bilinear, node];
+    bilinear_density_two_rows:        |l| combo(random(16, 2, 4), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [node];
+    bilinear_density_three_rows:      |l| combo(random(5, 3, 8), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [node];
+    bilinear_density_hot_top_row:     |l| combo(hot(64, 32, 20, 0), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [bilinear, node];
+    bilinear_density_hot_bottom:      |l| combo(hot(63, 33, 41, 32), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [node];
+    bilinear_density_hot_second:      |l| combo(hot(64, 32, 5, 1), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [node];
+    bilinear_density_hot_seam:        |l| combo(hot(64, 32, 63, 20), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [bilinear];
+    bilinear_density_rotated_hot_seam: |l| combo(hot(64, 32, 63, 20), l, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL, [node];
+    bilinear_density_one_row:         |l| combo(gradient(64, 1), l, Inversion, PiecewiseBilinear, Equirectangular, 0.0), FULL, [node];
+    bilinear_density_rotated_sky:     |l| combo(envlight::builtin::sky(256, 128), l, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL, [bilinear, node];
+    bilinear_density_rotated_random:  |l| combo(random(48, 24, 7), l, Inversion, PiecewiseBilinear, Equirectangular, 37.0), FULL, [node];
+    // The same importance through other samplers of the grid.
+    alias_random:                     |l| combo(random(91, 37, 91), l, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL, [bilinear];
+    alias_hot_top_row:                |l| combo(hot(64, 32, 20, 0), l, Alias, PiecewiseConstant, Equirectangular, 0.0), FULL, [nearest, node];
+    alias_rotated_sky:                |l| combo(envlight::builtin::sky(256, 128), l, Alias, PiecewiseConstant, Equirectangular, 37.0), FULL, [bilinear];
+    hierarchical_random:              |l| combo(random(91, 37, 91), l, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL, [bilinear];
+    hierarchical_hot_seam:            |l| combo(hot(64, 32, 63, 20), l, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL, [nearest, node];
+    hierarchical_rotated_sky:         |l| combo(envlight::builtin::sky(256, 128), l, Hierarchical, PiecewiseConstant, Equirectangular, 37.0), FULL, [bilinear];
+    hierarchical_wide_16384x1:        |l| combo(gradient(16384, 1), l, Hierarchical, PiecewiseConstant, Equirectangular, 0.0), FULL, [bilinear];
+    equal_area_random:                |l| combo(random(91, 37, 91), l, Inversion, PiecewiseConstant, EqualArea, 0.0), FULL, [bilinear];
+    equal_area_rotated_sky:           |l| combo(envlight::builtin::sky(256, 128), l, Inversion, PiecewiseConstant, EqualArea, 37.0), FULL, [nearest];
+    equal_area_alias_sky:             |l| combo(envlight::builtin::sky(256, 128), l, Alias, PiecewiseConstant, EqualArea, 0.0), FULL, [bilinear];
+    equal_area_hierarchical_hot:      |l| combo(hot(64, 32, 20, 3), l, Hierarchical, PiecewiseConstant, EqualArea, 0.0), FULL, [bilinear];
+    equal_area_bilinear_sky:          |l| combo(envlight::builtin::sky(256, 128), l, Inversion, PiecewiseBilinear, EqualArea, 0.0), FULL, [bilinear];
     // Sampling tables coarser than the map (`table_width`): the same checks, with
     // the support check proving the pooling conservative.
-    table_half_hot_middle:         table(hot(64, 32, 27, 13), Bilinear, Inversion, 32), FULL;
-    table_quarter_hot_top_row:     table(hot(64, 32, 21, 0), Nearest, Inversion, 16), FULL;
-    table_quarter_random:          table(random(96, 48, 5), Bilinear, Inversion, 24), FULL;
-    table_alias_hot_seam:          table(hot(64, 32, 63, 20), Bilinear, Alias, 16), FULL;
-    table_hierarchical_sky:        table(envlight::builtin::sky(256, 128), Bilinear, Hierarchical, 64), FULL;
-    table_one_cell:                table(random(48, 24, 3), Bilinear, Inversion, 2), FULL;
+    table_half_hot_middle:            |l| table(hot(64, 32, 27, 13), l, Inversion, 32), FULL, [bilinear];
+    table_quarter_hot_top_row:        |l| table(hot(64, 32, 21, 0), l, Inversion, 16), FULL, [nearest, node];
+    table_quarter_random:             |l| table(random(96, 48, 5), l, Inversion, 24), FULL, [bilinear];
+    table_alias_hot_seam:             |l| table(hot(64, 32, 63, 20), l, Alias, 16), FULL, [bilinear];
+    table_hierarchical_sky:           |l| table(envlight::builtin::sky(256, 128), l, Hierarchical, 64), FULL, [bilinear];
+    table_one_cell:                   |l| table(random(48, 24, 3), l, Inversion, 2), FULL, [bilinear];
 }
 
 /// A light whose sampling table is `table_width` cells wide.
@@ -241,19 +230,11 @@ black_cases! {
 // Real maps.
 // ---------------------------------------------------------------------------
 
-fn envmaps_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps")
-}
-
 /// The full harness on one real map (bilinear lookups, the default), with the
 /// statistics of `Config::REAL_MAP`. Skips with a printed reason when the folder is
 /// absent.
 fn real_map(file: &str) {
-    let dir = envmaps_dir();
-    if !dir.is_dir() {
-        println!("skipping real maps: {} not found", dir.display());
-        return;
-    }
+    let Some(dir) = common::envmaps() else { return };
     let path = dir.join(file);
     let start = std::time::Instant::now();
     let loaded = envlight::load::load(&path, &envlight::load::LoadOptions::default())
@@ -379,12 +360,16 @@ fn orientation_hot_texel_samples_come_from_its_direction() {
 // Broken samplers: the harness must reject each.
 // ---------------------------------------------------------------------------
 
-/// Delegates everything to a light; the broken samplers override one thing.
+/// Delegates everything to a light (`inner`); the broken samplers override one
+/// thing. `delegate!(radiance)`: only the radiance, its integral and the grid.
 macro_rules! delegate {
     () => {
         fn invert(&self, d: Vec3) -> Option<[f32; 2]> {
             self.inner.invert(d)
         }
+        delegate!(radiance);
+    };
+    (radiance) => {
         fn radiance(&self, d: Vec3) -> [f32; 3] {
             self.inner.radiance(d)
         }
@@ -397,49 +382,50 @@ macro_rules! delegate {
     };
 }
 
-/// Reports every pdf 5% too high (sample and `pdf()` agree with each other).
-struct ScaledPdf {
+/// Scales the density by `factor(ω)`, consistently in `sample()` and `pdf()` (they
+/// agree with each other, not with the samples).
+struct ScaledDensity {
     inner: EnvironmentLight,
-    factor: f32,
+    name: &'static str,
+    factor: fn(Vec3) -> f32,
 }
 
-impl SphereSampler for ScaledPdf {
+impl SphereSampler for ScaledDensity {
     fn name(&self) -> String {
-        format!("broken: pdf × {}", self.factor)
+        format!("broken: {}", self.name)
     }
     fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
         SphereSampler::sample(&self.inner, xi).map(|s| SphereSample {
-            pdf: s.pdf * self.factor,
+            pdf: s.pdf * (self.factor)(s.direction),
             ..s
         })
     }
     fn pdf(&self, d: Vec3) -> f32 {
-        self.inner.pdf(d) * self.factor
+        self.inner.pdf(d) * (self.factor)(d)
     }
     delegate!();
-}
-
-/// Forgets the `1/sin θ` of the solid-angle density (consistently in sample and pdf).
-struct NoSinJacobian {
-    inner: EnvironmentLight,
 }
 
 fn sin_theta(d: Vec3) -> f32 {
     d.x.hypot(d.y)
 }
 
-impl SphereSampler for NoSinJacobian {
+/// Samples right, but `pdf()` answers for `elsewhere(light, ω)` instead of `ω`.
+struct PdfElsewhere {
+    inner: EnvironmentLight,
+    name: &'static str,
+    elsewhere: fn(&EnvironmentLight, Vec3) -> Vec3,
+}
+
+impl SphereSampler for PdfElsewhere {
     fn name(&self) -> String {
-        "broken: no sin θ Jacobian".into()
+        format!("broken: {}", self.name)
     }
     fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        SphereSampler::sample(&self.inner, xi).map(|s| SphereSample {
-            pdf: s.pdf * sin_theta(s.direction),
-            ..s
-        })
+        SphereSampler::sample(&self.inner, xi)
     }
     fn pdf(&self, d: Vec3) -> f32 {
-        self.inner.pdf(d) * sin_theta(d)
+        self.inner.pdf((self.elsewhere)(&self.inner, d))
     }
     delegate!();
 }
@@ -491,34 +477,7 @@ impl SphereSampler for UnfilteredImportance {
     fn invert(&self, d: Vec3) -> Option<[f32; 2]> {
         self.importance.invert(d)
     }
-    fn radiance(&self, d: Vec3) -> [f32; 3] {
-        self.inner.radiance(d)
-    }
-    fn integral_luminance(&self) -> f64 {
-        self.inner.integral_luminance()
-    }
-    fn grid(&self) -> Option<Grid> {
-        SphereSampler::grid(&self.inner)
-    }
-}
-
-/// `pdf()` looks half a texel to the east of the asked direction.
-struct PdfHalfTexelOff {
-    inner: EnvironmentLight,
-}
-
-impl SphereSampler for PdfHalfTexelOff {
-    fn name(&self) -> String {
-        "broken: pdf() half a texel off in φ".into()
-    }
-    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        SphereSampler::sample(&self.inner, xi)
-    }
-    fn pdf(&self, d: Vec3) -> f32 {
-        let degrees = 180.0 / self.inner.image().width() as f32;
-        self.inner.pdf(Rotation::about_z_degrees(-degrees).apply(d))
-    }
-    delegate!();
+    delegate!(radiance);
 }
 
 /// The unbiasedness check of the luminance (and its lobes) with 1M samples, the
@@ -538,9 +497,10 @@ fn luminance_unbiasedness(s: &dyn SphereSampler, seed: u64) -> verify::Unbiasedn
 fn broken_scaled_pdf_is_rejected() {
     // pdf × 1.05: ∫p = 1.05; chi-square (1M samples, α = 1e-3) measured p ≈ 2e-26;
     // f = 1 estimate (1M samples) 76 standard errors low.
-    let s = ScaledPdf {
+    let s = ScaledDensity {
         inner: light(random(91, 37, 91), Bilinear),
-        factor: 1.05,
+        name: "pdf × 1.05",
+        factor: |_| 1.05,
     };
     let n = verify::normalisation(&s);
     let c = verify::chi_square(&s, 1_000_000, 21, 40_000);
@@ -557,8 +517,10 @@ fn broken_scaled_pdf_is_rejected() {
 #[test]
 fn broken_missing_sin_theta_is_rejected() {
     // ∫p = E[sin θ] ≈ 0.76 instead of 1; chi-square (1M samples, α = 1e-3) p ≈ 0.
-    let s = NoSinJacobian {
+    let s = ScaledDensity {
         inner: light(gradient(64, 32), Nearest),
+        name: "no sin θ Jacobian",
+        factor: sin_theta,
     };
     let n = verify::normalisation(&s);
     let c = verify::chi_square(&s, 1_000_000, 23, 40_000);
@@ -615,72 +577,32 @@ fn broken_unfiltered_importance_is_rejected() {
 fn broken_pdf_lookup_is_rejected() {
     // pdf() evaluated half a texel east: consistency (200k samples) fails on about
     // half of them; chi-square (1M samples, α = 1e-3) p ≈ 0.
-    let s = PdfHalfTexelOff {
+    let s = PdfElsewhere {
         inner: light(random(91, 37, 91), Nearest),
+        name: "pdf() half a texel off in φ",
+        elsewhere: |light, d| {
+            let degrees = 180.0 / light.image().width() as f32;
+            Rotation::about_z_degrees(-degrees).apply(d)
+        },
     };
-    let n = verify::normalisation(&s);
-    let c = verify::consistency(&s, 200_000, 26, verify::PDF_CONSISTENCY_TOLERANCE);
-    let chi = verify::chi_square(&s, 1_000_000, 27, 40_000);
+    assert_pdf_elsewhere_rejected(&s, 26);
+}
+
+/// Rejects `s` by its pdf() alone: normalisation cannot see a pdf that answers
+/// for the wrong direction (it still integrates to 1), but it no longer matches
+/// the samples: consistency (200k samples, `seed`) fails on more than half of
+/// them and chi-square (1M samples, `seed + 1`, α = 1e-3) rejects.
+fn assert_pdf_elsewhere_rejected(s: &PdfElsewhere, seed: u64) {
+    let n = verify::normalisation(s);
+    let c = verify::consistency(s, 200_000, seed, verify::PDF_CONSISTENCY_TOLERANCE);
+    let chi = verify::chi_square(s, 1_000_000, seed + 1, 40_000);
     println!("[{}]\n  {n}\n  {c}\n  {chi}", s.name());
-    // A shifted pdf still integrates to 1: normalisation cannot see it ...
     assert!(n.verdict(false).is_ok(), "{n}");
-    // ... but it no longer matches the samples.
     assert!(
         c.verdict().is_err() && c.pdf_failures > c.checked / 2,
         "{c}"
     );
-    assert!(chi.p_value < ALPHA, "{chi}");
-}
-
-/// An equal-area light whose `pdf()` reads the square at the transposed point
-/// `(v, u)` (rows and columns swapped), computed with the harness's own mapping;
-/// `sample()` is right.
-struct TransposedSquarePdf {
-    inner: EnvironmentLight,
-}
-
-impl SphereSampler for TransposedSquarePdf {
-    fn name(&self) -> String {
-        "broken: equal-area pdf() at the transposed square point".into()
-    }
-    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        SphereSampler::sample(&self.inner, xi)
-    }
-    fn pdf(&self, d: Vec3) -> f32 {
-        let [u, v] = verify::sphere_to_square([d.x as f64, d.y as f64, d.z as f64]);
-        let t = verify::square_to_sphere(v, u);
-        self.inner
-            .pdf(Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32))
-    }
-    delegate!();
-}
-
-/// An equal-area light that converts its density with the lat-long Jacobian
-/// `2π² sin θ` instead of the square's `4π` (consistently in sample and pdf).
-struct LatLongJacobian {
-    inner: EnvironmentLight,
-}
-
-impl LatLongJacobian {
-    fn factor(d: Vec3) -> f32 {
-        4.0 / (2.0 * std::f32::consts::PI * sin_theta(d))
-    }
-}
-
-impl SphereSampler for LatLongJacobian {
-    fn name(&self) -> String {
-        "broken: equal-area density with the lat-long Jacobian".into()
-    }
-    fn sample(&self, xi: [f32; 2]) -> Option<SphereSample> {
-        SphereSampler::sample(&self.inner, xi).map(|s| SphereSample {
-            pdf: s.pdf * Self::factor(s.direction),
-            ..s
-        })
-    }
-    fn pdf(&self, d: Vec3) -> f32 {
-        self.inner.pdf(d) * Self::factor(d)
-    }
-    delegate!();
+    assert!(chi.p_value < ALPHA && chi.verdict().is_err(), "{chi}");
 }
 
 #[test]
@@ -689,7 +611,15 @@ fn broken_equal_area_samplers_are_rejected() {
     // consistency (200k samples) fails on most samples (measured 195465 of 199974)
     // and chi-square (1M samples, α = 1e-3) rejects (p ≈ 0; 91851 samples where the
     // transposed pdf is 0).
-    let s = TransposedSquarePdf {
+    // (`pdf()` reads the square at `(v, u)`, rows and columns swapped, computed
+    // with the harness's own mapping.)
+    let s = PdfElsewhere {
+        name: "equal-area pdf() at the transposed square point",
+        elsewhere: |_, d| {
+            let [u, v] = verify::sphere_to_square([d.x as f64, d.y as f64, d.z as f64]);
+            let t = verify::square_to_sphere(v, u);
+            Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32)
+        },
         inner: combo(
             random(91, 37, 91),
             Nearest,
@@ -699,20 +629,15 @@ fn broken_equal_area_samplers_are_rejected() {
             0.0,
         ),
     };
-    let n = verify::normalisation(&s);
-    let c = verify::consistency(&s, 200_000, 28, verify::PDF_CONSISTENCY_TOLERANCE);
-    let chi = verify::chi_square(&s, 1_000_000, 29, 40_000);
-    println!("[{}]\n  {n}\n  {c}\n  {chi}", s.name());
-    assert!(n.verdict(false).is_ok(), "{n}");
-    assert!(
-        c.verdict().is_err() && c.pdf_failures > c.checked / 2,
-        "{c}"
-    );
-    assert!(chi.p_value < ALPHA && chi.verdict().is_err(), "{chi}");
+    assert_pdf_elsewhere_rejected(&s, 28);
 
     // The lat-long Jacobian: ∫p = 0.795, chi-square (1M samples, α = 1e-3) p ≈ 0,
     // and the f = 1 estimate (1M samples) 470 standard errors high.
-    let s = LatLongJacobian {
+    // (The density converted with the lat-long Jacobian `2π² sin θ` instead of the
+    // square's `4π`.)
+    let s = ScaledDensity {
+        name: "equal-area density with the lat-long Jacobian",
+        factor: |d| 4.0 / (2.0 * std::f32::consts::PI * sin_theta(d)),
         inner: combo(
             envlight::builtin::sky(256, 128),
             Bilinear,

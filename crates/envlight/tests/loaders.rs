@@ -2,7 +2,9 @@
 //! orientation for every format, colour-space conversion, bad input of every kind,
 //! and the real maps in `shared/envmaps` (skipped when that folder is absent).
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use envlight::color::{luminance, srgb_to_linear};
@@ -130,6 +132,15 @@ fn pfm_bytes(grey: bool, width: usize, scale: &str, rows_top_down: &[Vec<[f32; 3
     out
 }
 
+/// One of `loaded`'s notes mentions `what`.
+fn assert_note(loaded: &LoadedImage, what: &str) {
+    assert!(
+        loaded.notes.iter().any(|n| n.contains(what)),
+        "{what:?} in none of {:?}",
+        loaded.notes
+    );
+}
+
 fn pattern_rows() -> Vec<Vec<[f32; 3]>> {
     (0..H)
         .map(|y| (0..W).map(|x| pattern(x, y)).collect())
@@ -176,16 +187,8 @@ fn pfm_header_whitespace_scale_and_trailing_bytes() {
     spaced.extend_from_slice(b"trailing");
     let loaded = load_mem("spaced.pfm", &spaced);
     assert_pattern(&loaded, 0.0);
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("scale")),
-        "{:?}",
-        loaded.notes
-    );
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("8 bytes")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, "scale");
+    assert_note(&loaded, "8 bytes");
 }
 
 #[test]
@@ -778,11 +781,7 @@ fn exr_luminance_only_is_grey() {
                 assert_eq!(loaded.image.texel(x, yy), [v; 3], "({x}, {yy})");
             }
         }
-        assert!(
-            loaded.notes.iter().any(|n| n.contains("grey")),
-            "{:?}",
-            loaded.notes
-        );
+        assert_note(&loaded, "grey");
     }
 }
 
@@ -800,11 +799,7 @@ fn exr_picks_the_first_layer_with_rgb() {
     let bytes = exr_files::to_bytes(&exr_files::image(vec![depth, beauty], None));
     let loaded = load_mem("parts.exr", &bytes);
     assert_pattern(&loaded, 0.0);
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("beauty")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, "beauty");
 
     // Single part with channel-name layers: "Z" and "diffuse.{B,G,R}".
     let [b, g, r] = bgr_planes(pattern, W, H);
@@ -822,11 +817,7 @@ fn exr_picks_the_first_layer_with_rgb() {
     let bytes = exr_files::to_bytes(&exr_files::image(vec![named], None));
     let loaded = load_mem("named.exr", &bytes);
     assert_pattern(&loaded, 0.0);
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("diffuse")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, "diffuse");
 
     // Nothing usable: a clear error listing the channels.
     let only_z = exr_files::layer(
@@ -1048,11 +1039,7 @@ fn png_8_and_16_bit_are_srgb_decoded() {
             assert_eq!(loaded.image.texel(x, y), want, "({x}, {y})");
         }
     }
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("low-dynamic-range")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, "low-dynamic-range");
 
     // 16-bit, big-endian samples as PNG stores them... the encoder takes native u16.
     let data16: Vec<u16> = (0..W * H)
@@ -1081,11 +1068,7 @@ fn png_8_and_16_bit_are_srgb_decoded() {
         loaded.image.texel(0, 0),
         [1.0, 0.0, srgb_to_linear(128.0 / 255.0)]
     );
-    assert!(
-        loaded.notes.iter().any(|n| n.contains("alpha")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, "alpha");
     let grey: Vec<u8> = (0..W * H).map(|i| i as u8 * 10).collect();
     let loaded = load_mem("l.png", &png_bytes(image::ExtendedColorType::L8, &grey));
     assert_eq!(loaded.image.texel(4, 2), [srgb_to_linear(140.0 / 255.0); 3]);
@@ -1196,91 +1179,43 @@ fn content_decides_the_format_not_the_extension() {
     let loaded = load(&path, &opts()).unwrap();
     assert_eq!(loaded.format, ImageFormat::Pfm);
     assert_pattern(&loaded, 0.0);
-    assert!(
-        loaded.notes.iter().any(|n| n.contains(".exr")),
-        "{:?}",
-        loaded.notes
-    );
+    assert_note(&loaded, ".exr");
 }
 
 // ---------------------------------------------------------------------------
 // Real maps
 
-fn envmaps() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("skipping: {} not found", dir.display());
-        None
-    }
-}
-
-struct RealMap {
-    file: &'static str,
-    size: (usize, usize),
-    /// Texels with any negative channel (`None`: only "> 0" is known).
-    negative: Option<usize>,
-    brightest: (usize, usize),
-}
+/// The real maps: file, size, texels with any negative channel (`None`: only
+/// "> 0" is known), brightest texel.
+type RealMap = (&'static str, (usize, usize), Option<usize>, (usize, usize));
 
 const REAL_MAPS: [RealMap; 6] = [
-    RealMap {
-        file: "sunrise.exr",
-        size: (1024, 512),
-        negative: Some(570),
-        brightest: (614, 233),
-    },
-    RealMap {
-        // Colour-converted from D50 primaries before clamping, so the count differs.
-        file: "city.exr",
-        size: (1024, 512),
-        negative: None,
-        brightest: (614, 120),
-    },
-    RealMap {
-        file: "studio.exr",
-        size: (1024, 512),
-        negative: Some(3),
-        brightest: (709, 234),
-    },
-    RealMap {
-        file: "colorful_studio_2k.hdr",
-        size: (2048, 1024),
-        negative: Some(0),
-        brightest: (1182, 161),
-    },
-    RealMap {
-        file: "courtyard.exr",
-        size: (1024, 512),
-        negative: Some(1188),
-        brightest: (956, 214),
-    },
-    RealMap {
-        file: "night.exr",
-        size: (1024, 512),
-        negative: Some(596),
-        brightest: (289, 237),
-    },
+    ("sunrise.exr", (1024, 512), Some(570), (614, 233)),
+    // Colour-converted from D50 primaries before clamping, so the count differs.
+    ("city.exr", (1024, 512), None, (614, 120)),
+    ("studio.exr", (1024, 512), Some(3), (709, 234)),
+    ("colorful_studio_2k.hdr", (2048, 1024), Some(0), (1182, 161)),
+    ("courtyard.exr", (1024, 512), Some(1188), (956, 214)),
+    ("night.exr", (1024, 512), Some(596), (289, 237)),
 ];
 
 #[test]
 fn real_maps_load_with_the_documented_statistics() {
-    let Some(dir) = envmaps() else { return };
-    for map in &REAL_MAPS {
-        let path = dir.join(map.file);
+    let Some(dir) = common::envmaps() else { return };
+    for &(file, size, negative, brightest) in &REAL_MAPS {
+        let path = dir.join(file);
         let loaded = load(&path, &opts()).unwrap_or_else(|e| panic!("{e}"));
         let image = &loaded.image;
-        assert_eq!((image.width(), image.height()), map.size, "{}", map.file);
-        let expected_format = if map.file.ends_with(".hdr") {
+        assert_eq!((image.width(), image.height()), size, "{file}");
+        let expected_format = if file.ends_with(".hdr") {
             ImageFormat::RadianceHdr
         } else {
             ImageFormat::OpenExr
         };
         assert_eq!(loaded.format, expected_format);
-        match map.negative {
-            Some(n) => assert_eq!(loaded.sanitized.negative_texels, n, "{}", map.file),
-            None => assert!(loaded.sanitized.negative_texels > 0, "{}", map.file),
+        match negative {
+            Some(n) => assert_eq!(loaded.sanitized.negative_texels, n, "{file}"),
+            None => assert!(loaded.sanitized.negative_texels > 0, "{file}"),
         }
         assert_eq!(loaded.sanitized.non_finite_texels, 0);
         let (mut best, mut best_y) = ((0, 0), f32::MIN);
@@ -1292,24 +1227,18 @@ fn real_maps_load_with_the_documented_statistics() {
                 }
             }
         }
-        assert_eq!(best, map.brightest, "{} (Y = {best_y})", map.file);
+        assert_eq!(best, brightest, "{file} (Y = {best_y})");
         let converted = loaded.notes.iter().any(|n| n.contains("converted"));
-        assert_eq!(
-            converted,
-            map.file == "city.exr",
-            "{}: {:?}",
-            map.file,
-            loaded.notes
-        );
+        assert_eq!(converted, file == "city.exr", "{file}: {:?}", loaded.notes);
     }
 }
 
 #[test]
 fn truncated_real_maps_are_errors_not_panics() {
-    let Some(dir) = envmaps() else { return };
-    for map in &REAL_MAPS {
-        let name = format!("truncated-{}", map.file);
-        let bytes = std::fs::read(dir.join(map.file)).unwrap();
+    let Some(dir) = common::envmaps() else { return };
+    for &(file, ..) in &REAL_MAPS {
+        let name = format!("truncated-{file}");
+        let bytes = std::fs::read(dir.join(file)).unwrap();
         for len in [10, 100, 1000, bytes.len() / 2, bytes.len() - 1] {
             let err = expect_err(
                 load_from_memory(&name, &bytes[..len], &opts()),

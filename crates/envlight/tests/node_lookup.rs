@@ -1,9 +1,11 @@
 //! `Lookup::Node`, Mitsuba 3 envmap's reading of a lat-long map: exact values on
 //! tiny images, the batch queries equal to the one-point ones, the bilinear
 //! density's nodes on its rows, and the options it refuses. (Its sampling
-//! invariants are in `invariants.rs`, `*_node` cases.)
+//! invariants are in `invariants.rs`, the `*::node` cases.)
 
-use envlight::light::{Density, Mapping, Sampler};
+mod common;
+
+use envlight::light::{Density, Mapping};
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Vec3, WrapU};
 
 fn image_3x4() -> EnvImage {
@@ -68,12 +70,7 @@ fn batch_queries_equal_the_single_ones() {
         [x, 0.5 * x + 0.1, if (i + j) % 5 == 0 { 0.0 } else { 1.0 }]
     })
     .unwrap();
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Hierarchical, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in common::SAMPLER_DENSITIES {
         let options = LightOptions {
             lookup: Lookup::Node,
             sampler,

@@ -15,8 +15,9 @@
 //! - the residual's brightest texel within `r + 4` texels of the sun, against the
 //!   mean of the residual in the ring just outside: at most 3×.
 
+mod common;
+
 use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
 
 use envlight::light::Mapping;
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Rotation, Sun, SunOptions, Vec3};
@@ -689,22 +690,9 @@ fn a_black_sky_with_a_sun_has_infinite_contrast() {
 
 // ------------------------------------------------------------------ real maps
 
-fn envmaps() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "skipped: {} not found (the real maps are optional)",
-            dir.display()
-        );
-        None
-    }
-}
-
 #[test]
 fn real_maps_residual_plus_disc_reproduces_the_irradiance() {
-    let Some(dir) = envmaps() else { return };
+    let Some(dir) = common::envmaps() else { return };
     for name in envlight_verify::maps::SHARED {
         let path = dir.join(name);
         if !path.is_file() {

@@ -1,6 +1,8 @@
 //! Thread guarantees: the light is `Send + Sync`, and the same ξ gives bit-identical
 //! results whichever thread (or how many threads) evaluates it.
 
+mod common;
+
 use envlight::{builtin, EnvironmentLight, LightOptions, LightSample, Lookup, Rotation, Vec3};
 
 fn assert_send_sync<T: Send + Sync>() {}
@@ -90,15 +92,9 @@ fn many_threads_give_bit_identical_results_to_one() {
 /// give exactly what one call at a time gives.
 #[test]
 fn batch_sampling_equals_single_samples_for_every_sampler() {
-    use envlight::light::{Density, Sampler};
     let image = builtin::sky(200, 100);
     let xi: Vec<[f32; 2]> = (0..5_003u64).map(|k| envlight::rng::xi_2d(4, k)).collect();
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Hierarchical, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in common::SAMPLER_DENSITIES {
         let options = LightOptions {
             sampler,
             density,
@@ -144,7 +140,7 @@ fn building_is_independent_of_thread_count() {
 /// call at a time gives.
 #[test]
 fn batch_pdf_and_radiance_equal_single_queries() {
-    use envlight::light::{Density, Mapping, Sampler};
+    use envlight::light::Mapping;
     let image = builtin::sky(200, 100);
     let mut dirs: Vec<Vec3> = (0..5_003u64)
         .map(|k| {
@@ -172,12 +168,7 @@ fn batch_pdf_and_radiance_equal_single_queries() {
         Rotation::IDENTITY,
         tilt.then_after(Rotation::about_z_degrees(71.0)),
     ];
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Hierarchical, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in common::SAMPLER_DENSITIES {
         for mapping in [Mapping::Equirectangular, Mapping::EqualArea] {
             for lookup in [Lookup::Bilinear, Lookup::Nearest] {
                 for rotation in rotations {

@@ -378,88 +378,67 @@ fn gpu_corrupt_files_are_rejected_with_clear_errors() {
     let sections = t.sections();
     let entry = |id: u32| 16 + 32 * sections.iter().position(|s| s.id == id).unwrap();
 
-    rejected(
-        &patched(&good, 0, u32::from_le_bytes(*b"ENVX")),
-        "bad magic",
-    );
-    rejected(&patched(&good, 8, 2), "layout version 2");
     rejected(&good[..10], "truncated: 10 bytes");
     rejected(&good[..20], "section table");
     rejected(&good[..good.len() - 4], "radiance");
     rejected(&good[..good.len() - 4], "past the end of the file");
-    // A section out of bounds, misaligned, or overlapping the one before.
-    let at = entry(section::CONDITIONAL_CDF);
-    rejected(&patched(&good, at + 8, 1 << 30), "conditional_cdf");
-    rejected(&patched(&good, at + 8, 1 << 30), "past the end");
-    let offset = u64_at(&good, at + 8) as u32;
-    rejected(&patched(&good, at + 8, offset + 4), "not a multiple of 16");
-    rejected(&patched(&good, at + 8, offset - 16), "inside");
-    // A missing required section (its id made unknown: skipped).
-    rejected(
-        &patched(&good, entry(section::MARGINAL_GUIDE), 77),
-        "no marginal_guide section",
-    );
-    rejected(
-        &patched(&good, entry(section::RADIANCE), 77),
-        "no radiance section",
-    );
-    rejected(
-        &patched(&good, entry(section::PARAMS), 77),
-        "no params section",
-    );
-    // Inconsistent sizes and codes.
+    let cdf_offset_at = entry(section::CONDITIONAL_CDF) + 8;
+    let offset = u64_at(&good, cdf_offset_at) as u32;
     let params_at = sections[0].byte_offset as usize;
-    // One more row moves the sections after the conditional CDFs.
-    rejected(
-        &patched(&good, params_at + 4 * param::TABLE_HEIGHT, 9),
-        "parameter conditional_guide (word 42) is 152",
-    );
+    let param_at = |word: usize| params_at + 4 * word;
+    let cdf_at = sections[1].byte_offset as usize;
+    let guide_at = sections[4].byte_offset as usize;
+    // One u32 of the file replaced: (where, by what, what the error says).
+    for (at, value, needle) in [
+        (0, u32::from_le_bytes(*b"ENVX"), "bad magic"),
+        (8, 2, "layout version 2"),
+        // A section out of bounds, misaligned, or overlapping the one before.
+        (cdf_offset_at, 1 << 30, "conditional_cdf"),
+        (cdf_offset_at, 1 << 30, "past the end"),
+        (cdf_offset_at, offset + 4, "not a multiple of 16"),
+        (cdf_offset_at, offset - 16, "inside"),
+        // A missing required section (its id made unknown: skipped).
+        (
+            entry(section::MARGINAL_GUIDE),
+            77,
+            "no marginal_guide section",
+        ),
+        (entry(section::RADIANCE), 77, "no radiance section"),
+        (entry(section::PARAMS), 77, "no params section"),
+        // Inconsistent sizes and codes. One more row moves the sections after
+        // the conditional CDFs.
+        (
+            param_at(param::TABLE_HEIGHT),
+            9,
+            "parameter conditional_guide (word 42) is 152",
+        ),
+        (param_at(param::IMAGE_WIDTH), 17, "17x8"),
+        (param_at(param::SAMPLER), 1, "alias_offset_bits"),
+        (param_at(param::SAMPLER), 7, "sampler (word 25) is 7"),
+        (param_at(param::VERSION), 2, "version 2"),
+        (param_at(param::TABLES_WORDS), 4, "tables_words"),
+        (param_at(param::CONDITIONAL_CDF), 8, "conditional_cdf"),
+        (
+            entry(section::RADIANCE) + 4,
+            2,
+            "section radiance has 384 f16",
+        ),
+        (entry(section::MARGINAL_CDF) + 24, 3, "3 u32 elements in 36"),
+        // Contents a shader would walk off the end of.
+        (cdf_at + 4 * 8, 5, "marginal_cdf row 0"),
+        (guide_at, 16, "names cell 16 of 16"),
+    ] {
+        rejected(&patched(&good, at, value), needle);
+    }
     // Half the guide entries (and a tables buffer that short): the section in
     // the file is longer than the sizes say.
-    let shorter = patched(&good, params_at + 4 * param::CONDITIONAL_GUIDE_BITS, 2);
+    let shorter = patched(&good, param_at(param::CONDITIONAL_GUIDE_BITS), 2);
     let words = t.params()[param::TABLES_WORDS] - 32;
-    let shorter = patched(&shorter, params_at + 4 * param::TABLES_WORDS, words);
+    let shorter = patched(&shorter, param_at(param::TABLES_WORDS), words);
     rejected(
         &shorter,
         "conditional_guide holds 64 elements, but the parameters' sizes call for 32",
     );
-    rejected(
-        &patched(&good, params_at + 4 * param::IMAGE_WIDTH, 17),
-        "17x8",
-    );
-    rejected(
-        &patched(&good, params_at + 4 * param::SAMPLER, 1),
-        "alias_offset_bits",
-    );
-    rejected(
-        &patched(&good, params_at + 4 * param::SAMPLER, 7),
-        "sampler (word 25) is 7",
-    );
-    rejected(
-        &patched(&good, params_at + 4 * param::VERSION, 2),
-        "version 2",
-    );
-    rejected(
-        &patched(&good, params_at + 4 * param::TABLES_WORDS, 4),
-        "tables_words",
-    );
-    rejected(
-        &patched(&good, params_at + 4 * param::CONDITIONAL_CDF, 8),
-        "conditional_cdf",
-    );
-    rejected(
-        &patched(&good, entry(section::RADIANCE) + 4, 2),
-        "section radiance has 384 f16",
-    );
-    rejected(
-        &patched(&good, entry(section::MARGINAL_CDF) + 24, 3),
-        "3 u32 elements in 36",
-    );
-    // Contents a shader would walk off the end of.
-    let cdf_at = sections[1].byte_offset as usize;
-    rejected(&patched(&good, cdf_at + 4 * 8, 5), "marginal_cdf row 0");
-    let guide_at = t.sections()[4].byte_offset as usize;
-    rejected(&patched(&good, guide_at, 16), "names cell 16 of 16");
 
     let alias = EnvironmentLight::new(
         map(16, 8),
@@ -523,24 +502,18 @@ fn gpu_corrupt_files_are_rejected_with_clear_errors() {
     assert_eq!(GpuTables::from_bytes(&extra).unwrap(), t);
 }
 
-/// `t`'s file with one more section of unknown id 42 (16 bytes) at the end.
+/// `t`'s file with one more section of unknown id 42 (16 bytes) at the end:
+/// its header and section table with one more entry counted and every offset
+/// 32 bytes on, the new entry, its sections, then the new one's.
 fn extra_section(t: &GpuTables) -> Vec<u8> {
-    let mut sections = t.sections();
-    for s in sections.iter_mut() {
-        s.byte_offset += 32;
-    }
     let old = t.to_bytes();
-    let old_data = 16 + 32 * sections.len();
-    let mut b = Vec::new();
-    b.extend_from_slice(&MAGIC);
-    b.extend_from_slice(&VERSION.to_le_bytes());
-    b.extend_from_slice(&(sections.len() as u32 + 1).to_le_bytes());
-    for s in &sections {
-        b.extend_from_slice(&s.id.to_le_bytes());
-        b.extend_from_slice(&s.element.code().to_le_bytes());
-        b.extend_from_slice(&s.byte_offset.to_le_bytes());
-        b.extend_from_slice(&s.byte_len.to_le_bytes());
-        b.extend_from_slice(&s.count.to_le_bytes());
+    let n = t.sections().len();
+    let old_data = 16 + 32 * n;
+    let mut b = patched(&old[..old_data], 12, n as u32 + 1);
+    for k in 0..n {
+        let at = 16 + 32 * k + 8;
+        let moved = u64_at(&b, at) + 32;
+        b[at..at + 8].copy_from_slice(&moved.to_le_bytes());
     }
     let extra_at = (old.len() + 32) as u64;
     for w in [42u32, 0] {
