@@ -92,6 +92,15 @@ pub enum Error {
     /// sampler exported for a GPU, say).
     #[error("not supported: {0}")]
     Unsupported(String),
+    /// A saved file was made for another input than the one given (a visibility
+    /// cache for another light or scene).
+    #[error("{source_name}: {detail}")]
+    Mismatch {
+        /// The path or name of the file.
+        source_name: String,
+        /// What it was made for, and what it was asked for.
+        detail: String,
+    },
     /// A texel channel too large for a 16-bit float: it would round to infinity.
     #[error(
         "texel {pos} has {channel} = {value}, beyond the largest 16-bit float (65504); \

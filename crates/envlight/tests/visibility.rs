@@ -286,3 +286,103 @@ fn the_cache_cuts_the_variance_through_a_window() {
     assert!((m_cache - m_prod).abs() < 4.0 * se, "{m_cache} vs {m_prod}");
     assert!(ratio < 0.5, "variance ratio {ratio}");
 }
+
+#[test]
+fn a_saved_cache_loads_and_samples_the_same() {
+    let cache = room_cache(Room { roof: true }, &VisibilityOptions::default());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("room.envlvis");
+    cache.save(&path, "room v1").unwrap();
+    let loaded = VisibilityCache::load(&path, Arc::new(cache.product().clone()), "room v1").unwrap();
+    assert_eq!(loaded.summary(), cache.summary());
+    let factor = Factor::cosine(UP);
+    for position in [FLOOR, Vec3::new(-0.7, 0.6, 0.0)] {
+        let (a, b) = (cache.at(position, &factor), loaded.at(position, &factor));
+        for k in 0..2000 {
+            let xi = envlight::rng::xi_2d(5, k);
+            let (sa, sb) = (a.sample(xi).unwrap(), b.sample(xi).unwrap());
+            assert_eq!((sa.direction, sa.pdf.to_bits()), (sb.direction, sb.pdf.to_bits()));
+        }
+    }
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        loaded.to_bytes("room v1").unwrap(),
+        "save, load and save again: the same bytes"
+    );
+}
+
+#[test]
+fn a_cache_for_another_scene_or_light_is_refused() {
+    let cache = room_cache(Room { roof: false }, &VisibilityOptions::default());
+    let bytes = cache.to_bytes("room v1").unwrap();
+    let product = Arc::new(cache.product().clone());
+    let e = VisibilityCache::from_bytes(&bytes, "room.envlvis", product, "room v2").unwrap_err();
+    let message = e.to_string();
+    assert!(matches!(e, envlight::Error::Mismatch { .. }), "{message}");
+    assert!(message.contains("\"room v1\"") && message.contains("\"room v2\""), "{message}");
+    let rotated = EnvironmentLight::new(
+        envlight::builtin::sky(128, 64),
+        LightOptions {
+            rotation: envlight::Rotation::about_z_degrees(10.0),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let other = Arc::new(ProductSampler::new(Arc::new(rotated), ProductOptions::default()));
+    let e = VisibilityCache::from_bytes(&bytes, "room.envlvis", other, "room v1").unwrap_err();
+    assert!(matches!(e, envlight::Error::Mismatch { .. }), "{e}");
+}
+
+#[test]
+fn a_damaged_cache_file_is_an_error_never_a_panic() {
+    // Every truncation, and single-byte changes all over the file: a decode
+    // error (or, for a change that leaves a valid cache, a cache), never a panic.
+    let (points, normals) = room_points();
+    let product = Arc::new(
+        ProductSampler::new(
+            Arc::new(
+                EnvironmentLight::new(envlight::builtin::sky(32, 16), LightOptions::default())
+                    .unwrap(),
+            ),
+            ProductOptions {
+                patches: Some([8, 4]),
+                ..Default::default()
+            },
+        ),
+    );
+    let options = VisibilityOptions {
+        target_entries: 8,
+        ..Default::default()
+    };
+    let cache = VisibilityCache::build(
+        product.clone(),
+        &points[..200],
+        &normals[..200],
+        &options,
+        Room { roof: true }.trace(),
+    )
+    .unwrap();
+    let bytes = cache.to_bytes("k").unwrap();
+    for n in 0..bytes.len() {
+        let e = VisibilityCache::from_bytes(&bytes[..n], "cut", product.clone(), "k").unwrap_err();
+        assert!(matches!(e, envlight::Error::Decode { .. }), "cut at {n}: {e}");
+    }
+    let mut rng = envlight::rng::SplitMix64::new(9);
+    for _ in 0..5000 {
+        let mut damaged = bytes.clone();
+        let at = (rng.next_u64() % damaged.len() as u64) as usize;
+        damaged[at] = rng.next_u64() as u8;
+        match VisibilityCache::from_bytes(&damaged, "damaged", product.clone(), "k") {
+            Ok(c) => {
+                let point = c.at(FLOOR, &Factor::cosine(UP));
+                if let Some(s) = point.sample([0.3, 0.7]) {
+                    assert!(s.pdf > 0.0 && s.pdf.is_finite());
+                }
+            }
+            Err(e) => assert!(
+                matches!(e, envlight::Error::Decode { .. } | envlight::Error::Mismatch { .. }),
+                "{e}"
+            ),
+        }
+    }
+}

@@ -21,6 +21,8 @@ pub(crate) struct Grid {
     inv_radius: f32,
     bins: usize,
     map: HashMap<u64, u32, BuildHasherDefault<KeyHasher>>,
+    /// Each entry's key, by entry.
+    keys: Vec<u64>,
 }
 
 /// The points of each entry, by index, in the order entries are numbered.
@@ -68,7 +70,31 @@ impl Grid {
             inv_radius: 1.0 / radius,
             bins,
             map: HashMap::default(),
+            keys: Vec::new(),
         }
+    }
+
+    /// The grid of a saved cache: entry `e` has key `keys[e]`.
+    pub fn from_keys(radius: f32, bins: usize, keys: &[u64]) -> Result<Self, String> {
+        if !(radius > 0.0 && radius.is_finite()) {
+            return Err(format!("radius {radius}: must be positive and finite"));
+        }
+        let mut grid = Self::new(radius, bins);
+        for (e, &key) in keys.iter().enumerate() {
+            if (key & 0xff) as usize >= bins * bins {
+                return Err(format!("entry {e}: normal bin {} of {}", key & 0xff, bins * bins));
+            }
+            if grid.map.insert(key, e as u32).is_some() {
+                return Err(format!("entry {e}: the key of an earlier entry"));
+            }
+        }
+        grid.keys = keys.to_vec();
+        Ok(grid)
+    }
+
+    /// Each entry's key, by entry.
+    pub fn keys(&self) -> &[u64] {
+        &self.keys
     }
 
     /// Numbers the keys of `points` in order of first appearance; returns the
@@ -76,12 +102,14 @@ impl Grid {
     fn fill(&mut self, points: &[Vec3], normals: &[Vec3]) -> Groups {
         let mut groups: Groups = Vec::new();
         self.map.clear();
+        self.keys.clear();
         for (i, (&p, &n)) in points.iter().zip(normals).enumerate() {
             let Some(key) = self.key(p, n) else { continue };
             let next = groups.len() as u32;
             let e = *self.map.entry(key).or_insert(next);
             if e == next {
                 groups.push(Vec::new());
+                self.keys.push(key);
             }
             groups[e as usize].push(i as u32);
         }
@@ -123,7 +151,7 @@ impl Grid {
 
     /// Bytes of the lookup (its table's slots).
     pub fn memory_bytes(&self) -> usize {
-        self.map.capacity() * (std::mem::size_of::<(u64, u32)>() + 1)
+        self.map.capacity() * (std::mem::size_of::<(u64, u32)>() + 1) + 8 * self.keys.len()
     }
 }
 

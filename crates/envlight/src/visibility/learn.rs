@@ -7,6 +7,7 @@ use super::entries::Groups;
 use super::{Entry, VisibilityError, VisibilityOptions};
 use crate::distribution::Distribution1D;
 use crate::math::Vec3;
+use crate::product::patches::Patches;
 use crate::product::ProductSampler;
 use crate::rng::{mix64, SplitMix64};
 
@@ -53,17 +54,7 @@ pub(crate) fn learn<E>(
         .iter()
         .map(|group| {
             let (normal, cos_spread) = mean_normal(group, normals);
-            let bound = (0..count)
-                .map(|k| {
-                    if patches.power(k) > 0.0 {
-                        patches
-                            .max_dot(k, normal)
-                            .map_or(0.0, |m| cosine_bound(m, cos_spread as f64) as f32)
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
+            let bound = cosine_bounds(&patches, normal, cos_spread);
             Pending {
                 normal,
                 cos_spread,
@@ -148,22 +139,36 @@ impl Batch {
     }
 }
 
-/// The entry of `p`: `V̂ = (Σ t + a) / (m + a)`, `W = V̂ P_k C_e[k]`, and the
-/// learned share where any weight is positive.
+/// The entry of `p`, its estimates `V̂ = (Σ t + a) / (m + a)`.
 fn finish(
     p: Pending,
-    patches: &crate::product::patches::Patches<'_>,
+    patches: &Patches<'_>,
     options: &VisibilityOptions,
 ) -> Entry {
     let a = options.prior;
-    let visibility: Vec<f32> = p
+    let visibility = p
         .sum
         .iter()
         .zip(&p.count)
         .map(|(&s, &m)| (s + a) / (m as f32 + a))
         .collect();
+    entry(p.normal, p.cos_spread, &p.bound, visibility, patches, options)
+}
+
+/// The entry with normal `normal`, spread `cos_spread`, cosine bounds `bound`
+/// and estimates `visibility`: `W = V̂ P_k C_e[k]`, and the learned share where
+/// any weight is positive. The one place an entry's distribution is made, for a
+/// build and for a cache read back from a file alike.
+pub(crate) fn entry(
+    normal: Vec3,
+    cos_spread: f32,
+    bound: &[f32],
+    visibility: Vec<f32>,
+    patches: &Patches<'_>,
+    options: &VisibilityOptions,
+) -> Entry {
     let weights: Vec<f32> = (0..visibility.len())
-        .map(|k| (visibility[k] as f64 * patches.power(k) * p.bound[k] as f64) as f32)
+        .map(|k| (visibility[k] as f64 * patches.power(k) * bound[k] as f64) as f32)
         .collect();
     let distribution = Distribution1D::new(&weights);
     let share = if distribution.integral() > 0.0 {
@@ -172,12 +177,29 @@ fn finish(
         0.0
     };
     Entry {
-        normal: p.normal,
-        cos_spread: p.cos_spread,
+        normal,
+        cos_spread,
         share,
         visibility,
         patches: distribution,
     }
+}
+
+/// `C_e[k]` for every patch: an upper bound of the cosine between a normal
+/// within the spread of `normal` and a direction of the patch (0 for a patch
+/// without power or wholly behind every such normal).
+pub(crate) fn cosine_bounds(patches: &Patches<'_>, normal: Vec3, cos_spread: f32) -> Vec<f32> {
+    (0..patches.count())
+        .map(|k| {
+            if patches.power(k) > 0.0 {
+                patches
+                    .max_dot(k, normal)
+                    .map_or(0.0, |m| cosine_bound(m, cos_spread as f64) as f32)
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// The unit mean of the group's normals and the cosine of the widest angle

@@ -40,7 +40,10 @@
 //! entries fit [`VisibilityOptions::memory_budget`].
 
 mod entries;
+mod file;
 mod learn;
+
+pub use file::{light_hash, MAX_SCENE_KEY};
 
 use crate::distribution::Distribution1D;
 use crate::light::{solid_angle_density, LightSample};
@@ -357,7 +360,7 @@ impl VisibilityPoint<'_> {
     }
 }
 
-fn check_options<E>(o: &VisibilityOptions) -> Result<(), VisibilityError<E>> {
+pub(crate) fn check_options<E>(o: &VisibilityOptions) -> Result<(), VisibilityError<E>> {
     let bad = |what: String| Err(VisibilityError::Option(what));
     if let Some(r) = o.radius {
         if !(r > 0.0 && r.is_finite()) {
