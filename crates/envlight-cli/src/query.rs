@@ -40,6 +40,13 @@ pub struct Query {
     pub gpu: Option<envlight_gpu::GpuLight>,
 }
 
+impl Query {
+    /// The light of the map.
+    pub fn light(&self) -> &Arc<EnvironmentLight> {
+        &self.loaded.light
+    }
+}
+
 impl QueryArgs {
     /// `--normal`, when given.
     pub fn normal(&self) -> Option<Vec3> {

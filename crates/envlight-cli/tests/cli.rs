@@ -10,25 +10,8 @@ use assert_cmd::Command;
 use predicates::prelude::*;
 use tempfile::TempDir;
 
-const HEADER: &str = "x,y,z,pdf,r,g,b";
-
-fn envlight() -> Command {
-    Command::cargo_bin("envlight").expect("the envlight binary is built")
-}
-
-/// Writes a colour PFM by hand: `PF`, size, a negative scale (little-endian), then
-/// f32 RGB rows bottom to top. `texel(x, y)` has y = 0 at the top.
-fn write_pfm(path: &Path, w: usize, h: usize, texel: impl Fn(usize, usize) -> [f32; 3]) {
-    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
-    for y in (0..h).rev() {
-        for x in 0..w {
-            for c in texel(x, y) {
-                bytes.extend_from_slice(&c.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
-}
+mod common;
+use common::{envlight, importance, parse_rows, stdout_of, write_pfm, HEADER};
 
 /// A small map with structure: a warm hot spot, a blue sky gradient, dark ground.
 fn test_map(x: usize, y: usize) -> [f32; 3] {
@@ -68,29 +51,6 @@ fn file_names(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect()
-}
-
-fn stdout_of(cmd: &mut Command) -> String {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{:?} failed: {}",
-        cmd,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
-
-fn parse_rows(csv: &str) -> Vec<[f64; 7]> {
-    let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some(HEADER));
-    lines
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
-            assert_eq!(v.len(), 7, "{l}");
-            [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
-        })
         .collect()
 }
 
@@ -579,12 +539,7 @@ fn check_png(path: &Path, min_width: u32) {
 fn importance_writes_a_png_on_builtin_sky() {
     let dir = TempDir::new().unwrap();
     let png = dir.path().join("imp.png");
-    envlight()
-        .args(["importance", "--samples", "300", "--width", "256", "-o"])
-        .arg(&png)
-        .assert()
-        .success()
-        .stdout("");
+    importance(&["--samples", "300", "--width", "256"], &png);
     check_png(&png, 256);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
@@ -593,13 +548,11 @@ fn importance_writes_a_png_on_builtin_sky() {
 fn importance_upsamples_a_tiny_pfm_and_rotates() {
     let (dir, map) = pfm_dir();
     let png = dir.path().join("imp.png");
-    envlight()
-        .arg("importance")
-        .arg(&map)
-        .args(["--samples", "50", "--width", "128", "--rotate", "-45", "-o"])
-        .arg(&png)
-        .assert()
-        .success();
+    let m = map.to_str().unwrap();
+    importance(
+        &[m, "--samples", "50", "--width", "128", "--rotate", "-45"],
+        &png,
+    );
     check_png(&png, 128);
 }
 
@@ -622,10 +575,16 @@ fn verify(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap(), stdout)
 }
 
+/// `envlight verify ARGS` passes (exit 0); its table.
+fn verify_passes(args: &[&str]) -> String {
+    let (code, table) = verify(args);
+    assert_eq!(code, 0, "{args:?}\n{table}");
+    table
+}
+
 #[test]
 fn verify_passes_on_builtin_sky() {
-    let (code, table) = verify(&["--samples", "40000", "--seed", "1"]);
-    assert_eq!(code, 0, "{table}");
+    let table = verify_passes(&["--samples", "40000", "--seed", "1"]);
     let header: Vec<&str> = table
         .lines()
         .next()
@@ -658,18 +617,25 @@ fn verify_passes_on_builtin_sky() {
 
 #[test]
 fn verify_passes_on_small_pfm_with_options() {
+    verify_passes_on_pfm_with_each(
+        &["--samples", "20000"],
+        &[
+            &[],
+            &["--lookup", "nearest"],
+            &["--rotate", "100", "--scale", "3"],
+        ],
+    );
+}
+
+/// `verify` passes on [`pfm_dir`]'s map with `args` and each of `option_sets` in
+/// turn; the tables.
+fn verify_passes_on_pfm_with_each(args: &[&str], option_sets: &[&[&str]]) -> Vec<String> {
     let (_dir, map) = pfm_dir();
     let m = map.to_str().unwrap();
-    for extra in [
-        &[][..],
-        &["--lookup", "nearest"][..],
-        &["--rotate", "100", "--scale", "3"][..],
-    ] {
-        let mut args = vec![m, "--samples", "20000"];
-        args.extend_from_slice(extra);
-        let (code, table) = verify(&args);
-        assert_eq!(code, 0, "{extra:?}\n{table}");
-    }
+    option_sets
+        .iter()
+        .map(|options| verify_passes(&[&[m][..], args, options].concat()))
+        .collect()
 }
 
 #[test]
@@ -680,8 +646,7 @@ fn verify_passes_on_a_real_map() {
         eprintln!("skipped: {} not found", map.display());
         return;
     }
-    let (code, table) = verify(&[map.to_str().unwrap(), "--samples", "50000"]);
-    assert_eq!(code, 0, "{table}");
+    verify_passes(&[map.to_str().unwrap(), "--samples", "50000"]);
 }
 
 // ---------------------------------------------------------------- combinations
@@ -695,6 +660,18 @@ fn supported(sampler: &str, density: &str) -> bool {
     density != "piecewise-bilinear" || sampler == "inversion"
 }
 
+/// The options that choose the sampler, the density and the mapping.
+fn light_options<'a>(sampler: &'a str, density: &'a str, mapping: &'a str) -> [&'a str; 6] {
+    [
+        "--sampler",
+        sampler,
+        "--density",
+        density,
+        "--mapping",
+        mapping,
+    ]
+}
+
 /// Every option combination on `map`: `info --json` reports it, `sample` is
 /// deterministic across thread counts and round-trips through `eval`
 /// bit-identically, and `verify` passes (the invert check skipped for alias only).
@@ -706,14 +683,7 @@ fn every_combination(map: &str, input: &[&str], width: u64, height: u64, dir: &P
         }
         for sampler in SAMPLERS {
             for density in DENSITIES {
-                let mut options: Vec<&str> = vec![
-                    "--sampler",
-                    sampler,
-                    "--density",
-                    density,
-                    "--mapping",
-                    mapping,
-                ];
+                let mut options = light_options(sampler, density, mapping).to_vec();
                 options.extend_from_slice(input);
                 let what = format!("{map} {options:?}");
                 if !supported(sampler, density) {
@@ -794,8 +764,7 @@ fn every_combination(map: &str, input: &[&str], width: u64, height: u64, dir: &P
 
                 let mut args = vec![map, "--samples", "20000", "--seed", "3"];
                 args.extend_from_slice(&options);
-                let (code, table) = verify(&args);
-                assert_eq!(code, 0, "{what}\n{table}");
+                let table = verify_passes(&args);
                 let invert = table.lines().find(|l| l.starts_with("invert")).unwrap();
                 let result = invert.rsplit('|').next().unwrap().trim();
                 if sampler == "alias" {
@@ -1025,42 +994,19 @@ fn importance_and_bench_work_with_every_sampler_and_mapping() {
     let m = map.to_str().unwrap();
     for mapping in MAPPINGS {
         let png = dir.path().join("imp.png");
-        envlight()
-            .args([
-                "importance",
-                m,
-                "--width",
-                "128",
-                "--samples",
-                "30",
-                "--mapping",
-                mapping,
-                "-o",
-            ])
-            .arg(&png)
-            .assert()
-            .success();
+        let args = [m, "--width", "128", "--samples", "30", "--mapping", mapping];
+        importance(&args, &png);
         check_png(&png, 128);
         for sampler in SAMPLERS {
             for density in DENSITIES {
                 if !supported(sampler, density) {
                     continue;
                 }
-                let out = stdout_of(envlight().args([
-                    "bench",
-                    m,
-                    "--json",
-                    "--queries",
-                    "1024",
-                    "--repeat",
-                    "1",
-                    "--sampler",
-                    sampler,
-                    "--density",
-                    density,
-                    "--mapping",
-                    mapping,
-                ]));
+                let out = stdout_of(
+                    envlight()
+                        .args(["bench", m, "--json", "--queries", "1024", "--repeat", "1"])
+                        .args(light_options(sampler, density, mapping)),
+                );
                 let v: serde_json::Value = serde_json::from_str(&out).unwrap();
                 for key in ["sample_ns", "pdf_ns", "build_ms", "bytes_per_texel"] {
                     let x = v[key].as_f64().unwrap_or(f64::NAN);
@@ -1221,8 +1167,7 @@ fn negative_texels_are_clamped_with_a_warning() {
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["negative_texels"], 3);
-    let (code, table) = verify(&[path.to_str().unwrap(), "--samples", "5000"]);
-    assert_eq!(code, 0, "{table}");
+    verify_passes(&[path.to_str().unwrap(), "--samples", "5000"]);
 }
 
 #[test]
@@ -1302,8 +1247,7 @@ fn all_black_map_gives_pdf_zero_rows_and_a_warning() {
             .write_stdin("x,y,z\n0,0,1\n"),
     );
     assert_eq!(parse_rows(&evaluated)[0][3..], [0.0; 4]);
-    let (code, table) = verify(&[path.to_str().unwrap()]);
-    assert_eq!(code, 0, "{table}");
+    let table = verify_passes(&[path.to_str().unwrap()]);
     assert!(table.contains("skip"));
     // Whatever the sampler, density and mapping.
     for options in [
@@ -1318,17 +1262,10 @@ fn all_black_map_gives_pdf_zero_rows_and_a_warning() {
         assert!(rows.iter().all(|r| r[3..] == [0.0; 4]), "{options:?}");
         let v = info_json(&[&[p][..], options].concat());
         assert_eq!(v["black"], true, "{options:?}");
-        let (code, table) = verify(&[&[p][..], options].concat());
-        assert_eq!(code, 0, "{options:?}\n{table}");
+        verify_passes(&[&[p][..], options].concat());
     }
     let png = dir.path().join("black.png");
-    envlight()
-        .arg("importance")
-        .arg(&path)
-        .args(["--samples", "10", "-o"])
-        .arg(&png)
-        .assert()
-        .success();
+    importance(&[path.to_str().unwrap(), "--samples", "10"], &png);
     check_png(&png, 64);
 }
 
@@ -1361,15 +1298,12 @@ fn one_texel_and_one_hot_texel_maps_work() {
                 envlight().args(["sample", "-n", "2000"]).args(&args),
             ));
             assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())));
-            let (code, table) = verify(&[&args[..], &["--samples", "5000"]].concat());
-            assert_eq!(code, 0, "{args:?}\n{table}");
+            verify_passes(&[&args[..], &["--samples", "5000"]].concat());
             let png = dir.path().join("x.png");
-            envlight()
-                .args(["importance", "--width", "64", "--samples", "20", "-o"])
-                .arg(&png)
-                .args(&args)
-                .assert()
-                .success();
+            importance(
+                &[&["--width", "64", "--samples", "20"][..], &args].concat(),
+                &png,
+            );
         }
     }
 }
@@ -1434,20 +1368,24 @@ fn output_into_a_missing_directory_is_an_error_naming_it() {
     );
 }
 
+/// The binary started with `args`, its stdin and stdout piped, its stderr to `stderr`.
+fn spawn_piped(args: &[&str], stderr: Stdio) -> std::process::Child {
+    std::process::Command::new(assert_cmd::cargo::cargo_bin("envlight"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
 #[test]
 fn a_closed_pipe_ends_quietly() {
-    let bin = assert_cmd::cargo::cargo_bin("envlight");
     for args in [
         &["sample", "-n", "1000000"][..],
         &["eval", "--dirs", "-"][..],
     ] {
-        let mut child = std::process::Command::new(&bin)
-            .args(args)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_piped(args, Stdio::piped());
         let stdin = child.stdin.take().unwrap();
         let feeder = std::thread::spawn(move || {
             use std::io::Write;
@@ -1485,14 +1423,7 @@ fn a_closed_pipe_ends_quietly() {
 fn eval_streams_from_an_open_stdin() {
     // 70 000 rows (more than one read batch) go in and stdin stays open: results
     // must come out before the input ends, so eval never holds all of its input.
-    let bin = assert_cmd::cargo::cargo_bin("envlight");
-    let mut child = std::process::Command::new(&bin)
-        .args(["eval", "--dirs", "-"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_piped(&["eval", "--dirs", "-"], Stdio::null());
     let stdin = child.stdin.take().unwrap();
     let (close_tx, close_rx) = std::sync::mpsc::channel::<()>();
     let feeder = std::thread::spawn(move || {
@@ -1589,28 +1520,24 @@ fn normal_option_on_every_command() {
     );
     assert!(irradiance > 0.0 && p > 0.5 && p > l, "{v}");
 
-    let (_pfm_dir, map) = pfm_dir();
-    let m = map.to_str().unwrap();
-    for options in [
-        &[][..],
-        &["--sampler", "alias"][..],
-        &["--sampler", "hierarchical", "--mapping", "equal-area"][..],
-        &["--density", "piecewise-bilinear"][..],
-        &["--lookup", "nearest", "--rotate", "30"][..],
-    ] {
-        let mut args = vec![m, "--samples", "20000", "--normal", "0.2,-0.5,0.8"];
-        args.extend_from_slice(options);
-        let (code, table) = verify(&args);
-        assert_eq!(code, 0, "{options:?}\n{table}");
+    let tables = verify_passes_on_pfm_with_each(
+        &["--samples", "20000", "--normal", "0.2,-0.5,0.8"],
+        &[
+            &[],
+            &["--sampler", "alias"],
+            &["--sampler", "hierarchical", "--mapping", "equal-area"],
+            &["--density", "piecewise-bilinear"],
+            &["--lookup", "nearest", "--rotate", "30"],
+        ],
+    );
+    for table in tables {
         assert!(table.contains("unbiased (Y·cos⁺"), "{table}");
     }
     let png = dir.path().join("product.png");
-    envlight()
-        .args(["importance", "--width", "64", "--samples", "20", "-o"])
-        .arg(&png)
-        .args(normal)
-        .assert()
-        .success();
+    importance(
+        &[&["--width", "64", "--samples", "20"][..], &normal].concat(),
+        &png,
+    );
     check_png(&png, 64);
 
     // bench --normal adds the product's figures, each a positive number.
@@ -1659,8 +1586,7 @@ fn a_normal_facing_no_light() {
         envlight().args(["sample", m, "-n", "50", "--normal", "0,0,-1"]),
     ));
     assert!(rows.iter().all(|r| r[3..] == [0.0; 4]));
-    let (code, table) = verify(&[m, "--normal", "0,0,-1"]);
-    assert_eq!(code, 0, "{table}");
+    let table = verify_passes(&[m, "--normal", "0,0,-1"]);
     assert!(table.contains("no light faces the surface"), "{table}");
 }
 

@@ -7,13 +7,11 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
 use envlight_gpu::agreement::{compare, Agreement, Row};
 use tempfile::TempDir;
 
-fn envlight() -> Command {
-    Command::cargo_bin("envlight").expect("the envlight binary is built")
-}
+mod common;
+use common::{envlight, stdout_of};
 
 /// True when the binary finds a GPU adapter; otherwise prints why (or fails, when
 /// `ENVLIGHT_REQUIRE_GPU` is set).
@@ -36,13 +34,7 @@ fn has_gpu() -> bool {
 }
 
 fn run(args: &[&str]) -> String {
-    let out = envlight().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
+    stdout_of(envlight().args(args))
 }
 
 fn rows(csv: &str) -> Vec<Row> {

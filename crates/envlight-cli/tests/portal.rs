@@ -3,29 +3,14 @@
 //! pdfs of `sample`, and every malformed request is a usage error (exit 2) that
 //! says why.
 
-use assert_cmd::Command;
 use predicates::prelude::*;
 
-const HEADER: &str = "x,y,z,pdf,r,g,b";
+mod common;
+use common::{envlight, parse_rows, stdout_of};
+
 const WINDOW: &str = "4,1,0.8;4,2.2,0.8;4,2.2,1.9;4,1,1.9";
 const SKYLIGHT: &str = "1.2,1,2.5;2.4,1,2.5;2.4,2,2.5;1.2,2,2.5";
 const CENTRE: &str = "2,1.5,1.2";
-
-fn envlight() -> Command {
-    Command::cargo_bin("envlight").expect("the envlight binary is built")
-}
-
-fn rows(stdout: &[u8]) -> Vec<[f64; 7]> {
-    let text = String::from_utf8(stdout.to_vec()).unwrap();
-    let mut lines = text.lines();
-    assert_eq!(lines.next(), Some(HEADER));
-    lines
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
-            [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
-        })
-        .collect()
-}
 
 /// Whether the ray from `p` along `d` crosses the axis-aligned rectangle `quad`
 /// (one coordinate constant), by the test's own arithmetic.
@@ -60,15 +45,12 @@ fn quad(text: &str) -> [[f64; 3]; 4] {
 #[test]
 fn sample_goes_through_the_portals_and_eval_agrees() {
     let args = ["--portal", WINDOW, "--portal", SKYLIGHT, "--at", CENTRE];
-    let out = envlight()
-        .args(["sample", "-n", "2000", "--seed", "3"])
-        .args(args)
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let samples = rows(&out);
+    let out = stdout_of(
+        envlight()
+            .args(["sample", "-n", "2000", "--seed", "3"])
+            .args(args),
+    );
+    let samples = parse_rows(&out);
     assert_eq!(samples.len(), 2000);
     let p = [2.0, 1.5, 1.2];
     let (w, s) = (quad(WINDOW), quad(SKYLIGHT));
@@ -81,14 +63,11 @@ fn sample_goes_through_the_portals_and_eval_agrees() {
         );
     }
     // Deterministic per seed.
-    let again = envlight()
-        .args(["sample", "-n", "2000", "--seed", "3"])
-        .args(args)
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
+    let again = stdout_of(
+        envlight()
+            .args(["sample", "-n", "2000", "--seed", "3"])
+            .args(args),
+    );
     assert_eq!(out, again);
     // eval reproduces the rows, and gives 0 through no portal.
     let mut dirs = String::from("x,y,z\n");
@@ -96,16 +75,13 @@ fn sample_goes_through_the_portals_and_eval_agrees() {
         dirs.push_str(&format!("{},{},{}\n", r[0], r[1], r[2]));
     }
     dirs.push_str("0,0,-1\n-1,0,0\n");
-    let evals = envlight()
-        .args(["eval", "--dirs", "-"])
-        .args(args)
-        .write_stdin(dirs)
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let evals = rows(&evals);
+    let evals = stdout_of(
+        envlight()
+            .args(["eval", "--dirs", "-"])
+            .args(args)
+            .write_stdin(dirs),
+    );
+    let evals = parse_rows(&evals);
     for (e, r) in evals.iter().zip(&samples[..200]) {
         assert_eq!(e, r);
     }
@@ -147,22 +123,16 @@ fn verify_passes_and_a_point_that_sees_nothing_is_skipped() {
             "nothing lit is seen through the portals",
         ));
     // Sampling from there gives rows of pdf 0.
-    let out = envlight()
-        .args([
-            "sample",
-            "-n",
-            "10",
-            "--portal",
-            WINDOW,
-            "--at",
-            "4,0.5,2.5",
-        ])
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    assert!(rows(&out).iter().all(|r| r[3] == 0.0));
+    let out = stdout_of(envlight().args([
+        "sample",
+        "-n",
+        "10",
+        "--portal",
+        WINDOW,
+        "--at",
+        "4,0.5,2.5",
+    ]));
+    assert!(parse_rows(&out).iter().all(|r| r[3] == 0.0));
 }
 
 #[test]

@@ -6,14 +6,12 @@
 
 use std::path::{Path, PathBuf};
 
-use assert_cmd::Command;
 use envlight_gpu::shader::{ENTRY_POINTS, WGSL};
 use predicates::prelude::*;
 use tempfile::TempDir;
 
-fn envlight() -> Command {
-    Command::cargo_bin("envlight").expect("the envlight binary is built")
-}
+mod common;
+use common::envlight;
 
 /// `envlight shader ARGS` succeeds; its stdout.
 fn shader(args: &[&str]) -> Vec<u8> {
@@ -67,33 +65,45 @@ fn validate(program: &Path, args: &[&str], file: &Path) {
     );
 }
 
-#[test]
-fn glsl_passes_glslang_for_every_entry_point() {
-    let Some(glslang) = validator("glslangValidator", "glslang-tools") else {
+/// Writes every entry point in `lang` to `ENTRY.ext` and has the validator
+/// `program` (from the Debian package `package`) pass each, called with `args`.
+fn every_entry_point_passes(
+    lang: &str,
+    ext: &str,
+    (program, package): (&str, &str),
+    args: &[&str],
+) {
+    let Some(validator) = validator(program, package) else {
         return;
     };
     let dir = TempDir::new().unwrap();
     for entry in ENTRY_POINTS {
-        let path = dir.path().join(format!("{entry}.comp"));
+        let path = dir.path().join(format!("{entry}.{ext}"));
         let file = path.to_str().unwrap();
-        shader(&["--lang", "glsl", "--entry", entry, "-o", file]);
-        validate(&glslang, &["-S", "comp"], &path);
+        shader(&["--lang", lang, "--entry", entry, "-o", file]);
+        validate(&validator, args, &path);
     }
 }
 
 #[test]
+fn glsl_passes_glslang_for_every_entry_point() {
+    every_entry_point_passes(
+        "glsl",
+        "comp",
+        ("glslangValidator", "glslang-tools"),
+        &["-S", "comp"],
+    );
+}
+
+#[test]
 fn spirv_passes_spirv_val_for_every_entry_point() {
-    let Some(spirv_val) = validator("spirv-val", "spirv-tools") else {
-        return;
-    };
-    let dir = TempDir::new().unwrap();
-    for entry in ENTRY_POINTS {
-        let path = dir.path().join(format!("{entry}.spv"));
-        let file = path.to_str().unwrap();
-        shader(&["--lang", "spirv", "--entry", entry, "-o", file]);
-        // naga writes SPIR-V 1.3, the version Vulkan 1.1 consumes.
-        validate(&spirv_val, &["--target-env", "vulkan1.1"], &path);
-    }
+    // naga writes SPIR-V 1.3, the version Vulkan 1.1 consumes.
+    every_entry_point_passes(
+        "spirv",
+        "spv",
+        ("spirv-val", "spirv-tools"),
+        &["--target-env", "vulkan1.1"],
+    );
 }
 
 #[test]

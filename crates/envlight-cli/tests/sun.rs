@@ -8,22 +8,8 @@ use std::path::{Path, PathBuf};
 use assert_cmd::Command;
 use tempfile::TempDir;
 
-fn envlight() -> Command {
-    Command::cargo_bin("envlight").expect("the envlight binary is built")
-}
-
-/// Writes a colour PFM by hand (rows bottom to top, little-endian).
-fn write_pfm(path: &Path, w: usize, h: usize, texel: impl Fn(usize, usize) -> [f32; 3]) {
-    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
-    for y in (0..h).rev() {
-        for x in 0..w {
-            for c in texel(x, y) {
-                bytes.extend_from_slice(&c.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
-}
+mod common;
+use common::{envlight, importance, stdout_of, write_pfm};
 
 fn dir_deg(el: f64, az: f64) -> [f64; 3] {
     let (el, az) = (el.to_radians(), az.to_radians());
@@ -88,13 +74,7 @@ fn disc_dir() -> (TempDir, PathBuf) {
 }
 
 fn json_of(cmd: &mut Command) -> serde_json::Value {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    serde_json::from_str(&stdout_of(cmd)).unwrap()
 }
 
 fn vec3(v: &serde_json::Value) -> [f64; 3] {
@@ -233,18 +213,7 @@ fn residual_in_every_format_is_the_map_without_its_sun() {
     };
     for ext in ["pfm", "exr", "hdr", "EXR"] {
         let out = dir.path().join(format!("residual.{ext}"));
-        let run = envlight()
-            .arg("sun")
-            .arg(&map)
-            .arg("--residual")
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
+        stdout_of(envlight().arg("sun").arg(&map).arg("--residual").arg(&out));
         let got = load(&out);
         assert_eq!((got.width(), got.height()), (1024, 512));
         // PFM and 32-bit EXR are exact; RGBE keeps 8 bits of mantissa under an
@@ -270,19 +239,24 @@ fn residual_in_every_format_is_the_map_without_its_sun() {
     assert!(!names.iter().any(|n| n.ends_with(".partial")), "{names:?}");
 }
 
+/// `envlight sun MAP --residual FILE`, run.
+fn sun_residual(map: &Path, residual: &Path) -> std::process::Output {
+    envlight()
+        .arg("sun")
+        .arg(map)
+        .arg("--residual")
+        .arg(residual)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn errors_are_one_line_and_leave_existing_files_alone() {
     let (dir, map) = disc_dir();
     let existing = dir.path().join("keep.exr");
     std::fs::write(&existing, b"precious").unwrap();
     // A bad extension is a usage error (exit 2), found before the map is read.
-    let out = envlight()
-        .arg("sun")
-        .arg(&map)
-        .arg("--residual")
-        .arg(dir.path().join("residual.png"))
-        .output()
-        .unwrap();
+    let out = sun_residual(&map, &dir.path().join("residual.png"));
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -291,13 +265,7 @@ fn errors_are_one_line_and_leave_existing_files_alone() {
     );
     // A missing map: exit 1 naming it; the existing residual file is untouched.
     let missing = dir.path().join("missing.exr");
-    let out = envlight()
-        .arg("sun")
-        .arg(&missing)
-        .arg("--residual")
-        .arg(&existing)
-        .output()
-        .unwrap();
+    let out = sun_residual(&missing, &existing);
     assert_eq!(out.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -306,13 +274,7 @@ fn errors_are_one_line_and_leave_existing_files_alone() {
     );
     assert_eq!(std::fs::read(&existing).unwrap(), b"precious");
     // A residual into a directory that does not exist: exit 1 naming it.
-    let out = envlight()
-        .arg("sun")
-        .arg(&map)
-        .arg("--residual")
-        .arg(dir.path().join("nowhere/residual.pfm"))
-        .output()
-        .unwrap();
+    let out = sun_residual(&map, &dir.path().join("nowhere/residual.pfm"));
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("residual.pfm"));
 }
@@ -327,29 +289,12 @@ fn cyan_pixels(png: &Path) -> usize {
 fn importance_marks_the_disc() {
     let (dir, map) = disc_dir();
     let with = dir.path().join("with.png");
-    let run = envlight()
-        .arg("importance")
-        .arg(&map)
-        .args(["--width", "256", "-o"])
-        .arg(&with)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    importance(&[map.to_str().unwrap(), "--width", "256"], &with);
     assert!(cyan_pixels(&with) > 20);
     let grey = dir.path().join("grey.pfm");
     write_pfm(&grey, 256, 128, |_, _| [0.5; 3]);
     let without = dir.path().join("without.png");
-    envlight()
-        .arg("importance")
-        .arg(&grey)
-        .args(["--width", "256", "-o"])
-        .arg(&without)
-        .assert()
-        .success();
+    importance(&[grey.to_str().unwrap(), "--width", "256"], &without);
     assert_eq!(cyan_pixels(&without), 0);
 }
 

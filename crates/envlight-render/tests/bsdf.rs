@@ -10,7 +10,7 @@ use envlight::rng::SplitMix64;
 use envlight::Vec3;
 use envlight_render::bsdf::Bsdf;
 use envlight_render::warp::square_to_uniform_sphere;
-use envlight_verify::chi_square_warp as chi_square;
+use envlight_verify::{chi_square_warp, WarpChiSquare};
 
 const COPPER_ETA: [f32; 3] = [0.200, 0.924, 1.102];
 const COPPER_K: [f32; 3] = [3.912, 2.452, 2.142];
@@ -165,6 +165,28 @@ fn sample_reports_eval_and_pdf() {
 /// outgoing directions: 200 000 samples, a 24 × 48 grid in (cos θ, φ) over the upper
 /// hemisphere plus a "no sample" bin, expected counts by quadrature of `pdf`,
 /// significance α = 1e-3 per test, fixed seed. Also `∫ pdf ≤ 1`.
+/// The chi-square test of `bsdf`'s sampled directions at `wo` against the density
+/// `pdf`: 24 × 48 bins over the upper hemisphere (`sub`² quadrature points each),
+/// 200 000 samples from `seed`.
+fn chi_square(
+    bsdf: &Bsdf,
+    wo: Vec3,
+    pdf: impl Fn(Vec3) -> f32 + Sync,
+    sub: usize,
+    seed: u64,
+) -> WarpChiSquare {
+    chi_square_warp(
+        |xi| bsdf.sample(wo, xi[0], [xi[1], xi[2]]).map(|s| s.wi),
+        pdf,
+        (0.0, 1.0),
+        24,
+        48,
+        sub,
+        200_000,
+        seed,
+    )
+}
+
 #[test]
 fn sampling_matches_pdf_chi_square() {
     for (name, bsdf) in bsdfs() {
@@ -175,16 +197,7 @@ fn sampling_matches_pdf_chi_square() {
         };
         for (k, theta) in [10.0f32, 45.0, 80.0].into_iter().enumerate() {
             let wo = polar(theta);
-            let r = chi_square(
-                |xi| bsdf.sample(wo, xi[0], [xi[1], xi[2]]).map(|s| s.wi),
-                |wi| bsdf.pdf(wo, wi),
-                (0.0, 1.0),
-                24,
-                48,
-                sub,
-                200_000,
-                1000 + k as u64,
-            );
+            let r = chi_square(&bsdf, wo, |wi| bsdf.pdf(wo, wi), sub, 1000 + k as u64);
             eprintln!("{name} θo={theta}: {r:?}");
             assert!(
                 r.integral <= 1.0 + 1e-3,
@@ -218,29 +231,12 @@ fn chi_square_rejects_a_wrong_pdf() {
         k: COPPER_K,
     };
     let wo = polar(45.0);
-    let r = chi_square(
-        |xi| sampled.sample(wo, xi[0], [xi[1], xi[2]]).map(|s| s.wi),
-        |wi| claimed.pdf(wo, wi),
-        (0.0, 1.0),
-        24,
-        48,
-        8,
-        200_000,
-        7,
-    );
+    let r = chi_square(&sampled, wo, |wi| claimed.pdf(wo, wi), 8, 7);
     assert!(r.p_value < 1e-3, "wrong α accepted: p = {}", r.p_value);
 
     let diffuse = Bsdf::Diffuse { albedo: [1.0; 3] };
-    let r = chi_square(
-        |xi| diffuse.sample(wo, xi[0], [xi[1], xi[2]]).map(|s| s.wi),
-        |wi| diffuse.pdf(wo, wi) * if wi.z > 0.5 { 1.05 } else { 0.95 },
-        (0.0, 1.0),
-        24,
-        48,
-        4,
-        200_000,
-        8,
-    );
+    let skewed = |wi: Vec3| diffuse.pdf(wo, wi) * if wi.z > 0.5 { 1.05 } else { 0.95 };
+    let r = chi_square(&diffuse, wo, skewed, 4, 8);
     assert!(
         r.p_value < 1e-3,
         "skewed cosine pdf accepted: p = {}",

@@ -8,9 +8,7 @@ mod common;
 
 use envlight::rng::{mix64, SplitMix64};
 use envlight::{builtin, EnvImage, EnvironmentLight, LightOptions, Vec3};
-use envlight_render::{
-    render, render_with_error, Integrator, NoProgress, Ray, RenderSettings, Scene, Strategy,
-};
+use envlight_render::{Integrator, Ray, RenderSettings, Scene, Strategy};
 use std::f64::consts::PI;
 
 /// `∫ max(0, n·ω) dω` over the polygon `corners` seen from `p` (Lambert's formula:
@@ -38,23 +36,6 @@ fn polygon_cosine_integral(p: Vec3, n: Vec3, corners: &[Vec3; 4]) -> f64 {
         sum += angle * (c[0] * n[0] + c[1] * n[1] + c[2] * n[2]) / len;
     }
     0.5 * sum.abs()
-}
-
-fn mean_and_error(values: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
-    let n = values.len() as f64;
-    let mut mean = [0.0; 3];
-    let mut m2 = [0.0; 3];
-    for v in values {
-        for c in 0..3 {
-            mean[c] += v[c] as f64 / n;
-        }
-    }
-    for v in values {
-        for c in 0..3 {
-            m2[c] += (v[c] as f64 - mean[c]).powi(2);
-        }
-    }
-    (mean, m2.map(|m| (m / (n - 1.0) / n).sqrt()))
 }
 
 /// The room's furnace: under a constant map of radiance 1, the direct light at a
@@ -94,18 +75,9 @@ fn direct_light_through_the_openings_matches_the_closed_form() {
         let values: Vec<[f32; 3]> = (0..samples as u64)
             .map(|s| integrator.li(&ray, &mut SplitMix64::new(mix64(s))))
             .collect();
-        let (mean, se) = mean_and_error(&values);
+        let (mean, se) = common::mean_and_error(&values);
         eprintln!("{strategy:<12} {mean:.6?} ± {se:.6?} (closed form {expected:.6?})");
-        for c in 0..3 {
-            let err = (mean[c] - expected[c]).abs();
-            assert!(
-                err <= 5.0 * se[c] + 1e-3 * expected[c],
-                "{strategy} channel {c}: {} vs {} (se {})",
-                mean[c],
-                expected[c],
-                se[c]
-            );
-        }
+        common::assert_agrees(&strategy.to_string(), mean, se, expected, 1e-3);
         if strategy == Strategy::Portal {
             // Sampling ∝ solid angle of the openings: only the cosine varies.
             assert!(se[0] < 0.01 * expected[0], "{se:?}");
@@ -119,40 +91,23 @@ fn direct_light_through_the_openings_matches_the_closed_form() {
 fn strategies_agree_on_the_room() {
     let light = EnvironmentLight::new(builtin::sky(64, 32), LightOptions::default()).unwrap();
     let scene = Scene::builtin("room").unwrap();
-    let mut means = Vec::new();
-    for strategy in [
+    let settings = RenderSettings {
+        width: 32,
+        height: 18,
+        spp: 48,
+        max_depth: 4,
+        seed: 8,
+        ..Default::default()
+    };
+    let strategies = [
         Strategy::Mis,
         Strategy::Light,
         Strategy::Bsdf,
         Strategy::Portal,
         Strategy::MisPortal,
-    ] {
-        let settings = RenderSettings {
-            width: 32,
-            height: 18,
-            spp: 48,
-            max_depth: 4,
-            strategy,
-            seed: 8,
-            ..Default::default()
-        };
-        let r = render_with_error(&scene, &light, &settings, &NoProgress);
-        let (mean, se) = common::image_mean_and_error(&r);
-        eprintln!("{strategy:<12} {mean:.5?} ± {se:.6?}");
-        means.push((strategy, mean, se));
-    }
+    ];
+    let means = common::strategies_agree_with_mis(&scene, &light, &strategies, &settings);
     let mis = means[0];
-    for (strategy, mean, se) in &means {
-        for c in 0..3 {
-            let tol = 5.0 * (se[c].powi(2) + mis.2[c].powi(2)).sqrt();
-            assert!(
-                (mean[c] - mis.1[c]).abs() <= tol,
-                "{strategy} channel {c}: {} vs mis {} (tol {tol})",
-                mean[c],
-                mis.1[c]
-            );
-        }
-    }
     // Sampling through the openings beats sampling the whole sky per sample.
     let portal = means.iter().find(|m| m.0 == Strategy::MisPortal).unwrap();
     assert!(portal.2[1] < mis.2[1], "{:?} vs {:?}", portal.2, mis.2);
@@ -172,18 +127,6 @@ fn portal_renders_are_the_same_for_any_thread_count() {
             seed: 3,
             ..Default::default()
         };
-        let run = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| render(&scene, &light, &settings, &NoProgress))
-        };
-        let one = run(1);
-        assert_eq!(one, run(3), "{strategy}");
-        assert!(one
-            .pixels()
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite() && *c >= 0.0)));
+        common::render_on_any_thread_count(&scene, &light, &settings);
     }
 }

@@ -56,19 +56,7 @@ fn same_image_for_any_thread_count() {
             seed: 42,
             ..Default::default()
         };
-        let run = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| render(&scene, &light, &settings, &NoProgress))
-        };
-        let one = run(1);
-        assert_eq!(one, run(3), "{strategy}");
-        assert!(one
-            .pixels()
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite() && *c >= 0.0)));
+        let one = common::render_on_any_thread_count(&scene, &light, &settings);
         // Another seed gives another image.
         let other = render(
             &scene,
@@ -112,34 +100,15 @@ fn time_budget_render_equals_sample_count_render() {
 fn strategies_agree_on_balls() {
     let light = soft_light();
     let scene = Scene::builtin("balls").unwrap();
-    let mut means = Vec::new();
-    for strategy in Strategy::ALL {
-        let settings = RenderSettings {
-            width: 48,
-            height: 27,
-            spp: 96,
-            max_depth: 6,
-            strategy,
-            seed: 5,
-            ..Default::default()
-        };
-        let r = render_with_error(&scene, &light, &settings, &NoProgress);
-        let (mean, se) = common::image_mean_and_error(&r);
-        eprintln!("{strategy:<16} {mean:.5?} ± {se:.6?}");
-        means.push((strategy, mean, se));
-    }
-    let mis = *means.iter().find(|m| m.0 == Strategy::Mis).unwrap();
-    for (strategy, mean, se) in &means {
-        for c in 0..3 {
-            let tol = 5.0 * (se[c].powi(2) + mis.2[c].powi(2)).sqrt();
-            assert!(
-                (mean[c] - mis.1[c]).abs() <= tol,
-                "{strategy} channel {c}: {} vs mis {} (tol {tol})",
-                mean[c],
-                mis.1[c]
-            );
-        }
-    }
+    let settings = RenderSettings {
+        width: 48,
+        height: 27,
+        spp: 96,
+        max_depth: 6,
+        seed: 5,
+        ..Default::default()
+    };
+    common::strategies_agree_with_mis(&scene, &light, &Strategy::ALL, &settings);
 }
 
 #[test]

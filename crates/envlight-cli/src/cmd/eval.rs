@@ -14,7 +14,7 @@ use super::Outcome;
 use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::output::{open_input, write_bytes, Output};
 use crate::progress::Progress;
-use crate::query::{Query, QueryArgs};
+use crate::query::QueryArgs;
 use crate::shading::Density;
 
 /// Lines read before a batch is processed.
@@ -73,15 +73,10 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     }
     let columns = Columns::from_header(&line, &source)?;
 
-    let Query {
-        loaded,
-        product,
-        portals,
-        gpu,
-    } = args.query.open()?;
-    let light = &loaded.light;
-    let density = Density::new(light, product.as_ref(), args.query.normal());
-    let portal_point = portals.as_ref().map(|(pl, at)| pl.at(*at));
+    let query = args.query.open()?;
+    let light = query.light();
+    let density = Density::new(light, query.product.as_ref(), args.query.normal());
+    let portal_point = query.portals.as_ref().map(|(pl, at)| pl.at(*at));
     let pdf = |d: Vec3| match &portal_point {
         Some(point) => point.pdf(d),
         None => density.pdf(d),
@@ -108,7 +103,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         progress.inc(batch.len() as u64);
         let tasks = (0..batch.len()).into_par_iter().step_by(TASK_LINES);
         let range = |first: usize| first..(first + TASK_LINES).min(batch.len());
-        let results: Vec<anyhow::Result<Vec<u8>>> = match &gpu {
+        let results: Vec<anyhow::Result<Vec<u8>>> = match &query.gpu {
             None => tasks
                 .map(|first| {
                     let directions = parse_lines(&columns, &batch, range(first), &source)?;

@@ -125,19 +125,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
         map_title.push_str(&suffix);
     }
     let sun_ring = sun.map(|s| disc_outline(&s, pw, ph));
-    canvas.text(
-        layout.left,
-        layout.top1 - layout.title_gap(),
-        &map_title,
-        scale,
-        INK,
-    );
-    let map_pixels: Vec<[u8; 3]> = panels
-        .rgb
-        .par_iter()
-        .map(|&rgb| tone_map(rgb, exposure))
-        .collect();
-    canvas.blit(layout.left, layout.top1, pw, ph, &map_pixels);
+    canvas.panel(&layout, layout.top1, &map_title, &panels.rgb, |&rgb| {
+        tone_map(rgb, exposure)
+    });
 
     // Panel 2: the density.
     let mut density_title = match args.normal.normal {
@@ -150,19 +140,9 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     if args.samples > 0 {
         density_title.push_str(&format!("  {} SAMPLES", args.samples));
     }
-    canvas.text(
-        layout.left,
-        layout.top2 - layout.title_gap(),
-        &density_title,
-        scale,
-        INK,
-    );
-    let heat_pixels: Vec<[u8; 3]> = panels
-        .pdf
-        .par_iter()
-        .map(|&p| heat_colour(p, lo, hi))
-        .collect();
-    canvas.blit(layout.left, layout.top2, pw, ph, &heat_pixels);
+    canvas.panel(&layout, layout.top2, &density_title, &panels.pdf, |&p| {
+        heat_colour(p, lo, hi)
+    });
 
     for &top in &[layout.top1, layout.top2] {
         for &(x, y) in &dots {
@@ -472,6 +452,22 @@ impl Canvas {
                 self.set(x + xx, y + yy, src[yy * w + xx]);
             }
         }
+    }
+
+    /// A panel of the layout at `top`: its title above it, then `values` (row-major,
+    /// the layout's panel size), each drawn in the colour `colour` gives it.
+    fn panel<T: Sync>(
+        &mut self,
+        layout: &Layout,
+        top: usize,
+        title: &str,
+        values: &[T],
+        colour: impl Fn(&T) -> [u8; 3] + Sync + Send,
+    ) {
+        let scale = layout.scale;
+        self.text(layout.left, top - layout.title_gap(), title, scale, INK);
+        let pixels: Vec<[u8; 3]> = values.par_iter().map(colour).collect();
+        self.blit(layout.left, top, layout.panel_w, layout.panel_h, &pixels);
     }
 
     fn text(&mut self, x: usize, y: usize, text: &str, scale: usize, c: [u8; 3]) {

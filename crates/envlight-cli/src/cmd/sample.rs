@@ -13,7 +13,7 @@ use crate::csv::{push_row, HEADER, MAX_ROW_BYTES};
 use crate::light_args::warn;
 use crate::output::{write_bytes, Output};
 use crate::progress::Progress;
-use crate::query::{Query, QueryArgs};
+use crate::query::QueryArgs;
 
 /// Rows formatted by one task.
 const CHUNK_ROWS: u64 = 8192;
@@ -81,18 +81,14 @@ pub struct Args {
 /// Runs `envlight sample`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     args.query.check()?;
-    let Query {
-        loaded,
-        product,
-        portals,
-        gpu,
-    } = args.query.open()?;
-    let light = &loaded.light;
-    let density = match &portals {
+    let query = args.query.open()?;
+    let light = query.light();
+    let loaded = &query.loaded;
+    let density = match &query.portals {
         Some((pl, at)) => Density::Portal(Box::new(pl.at(*at))),
         None => Density::Shading(crate::shading::Density::new(
             light,
-            product.as_ref(),
+            query.product.as_ref(),
             args.query.normal(),
         )),
     };
@@ -100,13 +96,13 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     write_bytes(&mut out, format!("{HEADER}\n").as_bytes())?;
 
     let progress = Progress::bar(args.count, "sampling");
-    let failed = match &gpu {
+    let failed = match &query.gpu {
         Some(gpu) => write_gpu_rows(gpu, args, &mut out, &progress)?,
         None => write_cpu_rows(light, &density, args, &mut out, &progress)?,
     };
     progress.finish();
     out.finish()?;
-    if failed > 0 && !loaded.black && portals.is_some() {
+    if failed > 0 && !loaded.black && query.portals.is_some() {
         warn(&format!(
             "{}: {failed} of {} sample points gave no direction (nothing lit is seen \
              through the portals from --at, or the point fell outside a portal that is \

@@ -14,7 +14,7 @@ use envlight_verify::{
 use super::Outcome;
 use crate::output::Output;
 use crate::progress::Progress;
-use crate::query::{Query, QueryArgs};
+use crate::query::QueryArgs;
 
 /// Arguments of `envlight verify`.
 #[derive(Debug, clap::Args)]
@@ -78,21 +78,22 @@ const PDF_TOLERANCE: f64 = 1e-3;
 /// Runs `envlight verify`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     args.query.check()?;
-    let Query {
-        loaded,
-        product,
-        portals,
-        gpu,
-    } = args.query.open()?;
-    let light = &loaded.light;
+    let query = args.query.open()?;
+    let light = query.light();
+    let loaded = &query.loaded;
     let n = args.samples as usize;
-    let at_portals = portals.as_ref().map(|(pl, at)| AtPortalPoint::new(pl, *at));
+    let at_portals = query
+        .portals
+        .as_ref()
+        .map(|(pl, at)| AtPortalPoint::new(pl, *at));
     let unseen = at_portals.as_ref().is_some_and(|a| a.power() <= 0.0);
-    let on_gpu = gpu
+    let on_gpu = query
+        .gpu
         .as_ref()
         .zip(SphereSampler::grid(light.as_ref()))
         .map(|(g, grid)| envlight_gpu::GpuSphereSampler::new(g, grid));
-    let at = product
+    let at = query
+        .product
         .as_ref()
         .zip(args.query.normal())
         .map(|(p, normal)| AtShadingPoint::new(p, Factor::cosine(normal)));
