@@ -80,6 +80,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         ("load_any", [hdr, exr, pfm, png, jpeg].concat()),
         ("gpu_tables", gpu_seeds()?),
         ("distribution", distribution_seeds()),
+        ("visibility_cache", visibility_seeds()?),
     ];
     for (target, seeds) in &mut targets {
         seeds.sort();
@@ -1286,4 +1287,61 @@ fn distribution_seeds() -> Vec<Seed> {
     .into_iter()
     .map(|(name, bytes)| (name.to_string(), bytes))
     .collect()
+}
+
+/// Visibility cache files for the light and patch grid of the
+/// `visibility_cache` target (the built-in sky 32 × 16, 8 × 4 patches), learned
+/// over points on a floor and a wall with a tracer that sees the sky above a
+/// slanted line, under a few option sets; without the 24 bytes of magic,
+/// version, light hash and empty scene key the target puts back.
+fn visibility_seeds() -> Result<Vec<Seed>, Box<dyn Error>> {
+    use envlight::visibility::{VisibilityCache, VisibilityOptions};
+    use envlight::{ProductOptions, ProductSampler, Vec3};
+    use std::sync::Arc;
+    let light = EnvironmentLight::new(envlight::builtin::sky(32, 16), LightOptions::default())?;
+    let product = Arc::new(ProductSampler::new(
+        Arc::new(light),
+        ProductOptions {
+            patches: Some([8, 4]),
+            ..Default::default()
+        },
+    ));
+    let (mut points, mut normals) = (Vec::new(), Vec::new());
+    for i in 0..12 {
+        for j in 0..12 {
+            let (a, b) = (i as f32 / 6.0 - 1.0, j as f32 / 6.0 - 1.0);
+            points.push(Vec3::new(a, b, 0.0));
+            normals.push(Vec3::new(0.0, 0.0, 1.0));
+            points.push(Vec3::new(-1.0, a, b + 1.0));
+            normals.push(Vec3::new(1.0, 0.0, 0.0));
+        }
+    }
+    let sky_above_a_line = |_: &[Vec3], d: &[Vec3], t: &mut [f32]| -> Result<(), String> {
+        for (d, t) in d.iter().zip(t.iter_mut()) {
+            *t = (d.z > 0.3 + 0.2 * d.x) as u8 as f32;
+        }
+        Ok(())
+    };
+    let mut seeds = Vec::new();
+    for (name, target_entries, normal_bins, rays_per_patch) in
+        [("few", 2, 1, 1), ("some", 6, 2, 2), ("many", 24, 4, 3)]
+    {
+        let options = VisibilityOptions {
+            target_entries,
+            normal_bins,
+            rays_per_patch,
+            ..Default::default()
+        };
+        let cache = VisibilityCache::build(
+            product.clone(),
+            &points,
+            &normals,
+            &options,
+            sky_above_a_line,
+        )
+        .map_err(|e| e.to_string())?;
+        let bytes = cache.to_bytes("")?;
+        seeds.push((name.to_string(), bytes[24..].to_vec()));
+    }
+    Ok(seeds)
 }
