@@ -10,7 +10,11 @@ use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use envlight::light::Density;
 use envlight::portal::{Portal, PortalLight, PortalOptions, PortalPoint};
 use envlight::rng::SplitMix64;
-use envlight::{EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3};
+use envlight::visibility::{VisibilityOptions, VisibilityPoint, VisibilitySummary};
+use envlight::{
+    EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3, VisibilityCache,
+};
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Product samples per diffuse vertex under [`Strategy::MisProduct`] (see
@@ -52,7 +56,10 @@ pub struct Integrator<'a> {
     strategy: Strategy,
     max_depth: u32,
     compensated: Option<CompensatedLight>,
-    product: Option<ProductSampler>,
+    product: Option<Arc<ProductSampler>>,
+    /// The visibility cache of `mis-visibility`, once [`Self::learn_visibility`]
+    /// has built it.
+    visibility: Option<VisibilityCache>,
     /// The portal light over the scene's openings, for the portal strategies in a
     /// scene that has portals.
     portal: Option<PortalLight>,
@@ -126,7 +133,7 @@ impl<'a> Integrator<'a> {
             .then(|| CompensatedLight::new(light));
         let product = strategy
             .uses_product()
-            .then(|| ProductSampler::new(Arc::new(light.clone()), options));
+            .then(|| Arc::new(ProductSampler::new(Arc::new(light.clone()), options)));
         let portal = (strategy.uses_portals() && !scene.portals.is_empty()).then(|| {
             let quads: Vec<Portal> = scene
                 .portals
@@ -150,6 +157,7 @@ impl<'a> Integrator<'a> {
             max_depth,
             compensated,
             product,
+            visibility: None,
             portal,
             product_metals_below,
         }
@@ -158,6 +166,55 @@ impl<'a> Integrator<'a> {
     /// The strategy in use.
     pub fn strategy(&self) -> Strategy {
         self.strategy
+    }
+
+    /// For `mis-visibility`: builds the visibility cache from the first hits of
+    /// the camera's rays through the pixel centres of a `width × height` image,
+    /// each ray's transmittance being the scene's own shadow-ray test, and
+    /// returns what it holds. `None` (and nothing built) for other strategies.
+    pub fn learn_visibility(
+        &mut self,
+        width: usize,
+        height: usize,
+        options: &VisibilityOptions,
+    ) -> Option<VisibilitySummary> {
+        let product = self.product.as_ref().filter(|_| self.strategy.uses_visibility())?;
+        let scene = self.scene;
+        let hits: Vec<(Vec3, Vec3)> = (0..width * height)
+            .into_par_iter()
+            .filter_map(|i| {
+                let (x, y) = ((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
+                let ray = scene.camera.ray(x, y, width, height);
+                let hit = scene.intersect(&ray, f32::INFINITY)?;
+                // Oriented as the path tracer shades it: towards the viewer.
+                let normal = if hit.normal.dot(ray.direction) > 0.0 {
+                    -hit.normal
+                } else {
+                    hit.normal
+                };
+                Some((hit.point, normal))
+            })
+            .collect();
+        let (points, normals): (Vec<Vec3>, Vec<Vec3>) = hits.into_iter().unzip();
+        let trace = |origins: &[Vec3], directions: &[Vec3], out: &mut [f32]| {
+            out.par_iter_mut()
+                .zip(origins.par_iter().zip(directions.par_iter()))
+                .for_each(|(t, (&o, &d))| {
+                    // Pushed off along the ray: the cache traces only directions
+                    // above the point's surface.
+                    let blocked = scene.occluded(&Ray::spawn(o, d, d));
+                    *t = if blocked { 0.0 } else { 1.0 };
+                });
+            Ok::<(), std::convert::Infallible>(())
+        };
+        let cache = match VisibilityCache::build(product.clone(), &points, &normals, options, trace)
+        {
+            Ok(cache) => cache,
+            Err(e) => unreachable!("the scene's hits are finite and its tracer exact: {e}"),
+        };
+        let summary = cache.summary();
+        self.visibility = Some(cache);
+        Some(summary)
     }
 
     /// Working state for [`Self::li_with`], one per thread: for the product
@@ -183,9 +240,13 @@ impl<'a> Integrator<'a> {
         d: Vec3,
         point: Option<&ShadingPoint>,
         portal: Option<&PortalPoint>,
+        seen: Option<&VisibilityPoint>,
     ) -> f32 {
+        if let Some(v) = seen {
+            return v.pdf(d);
+        }
         match (&self.compensated, self.strategy) {
-            (Some(c), Strategy::MisProduct) => match point {
+            (Some(c), Strategy::MisProduct | Strategy::MisVisibility) => match point {
                 Some(p) => p.pdf(d),
                 None => c.pdf(d),
             },
@@ -212,7 +273,11 @@ impl<'a> Integrator<'a> {
         xi: [f32; 2],
         point: Option<&ShadingPoint>,
         portal: Option<&PortalPoint>,
+        seen: Option<&VisibilityPoint>,
     ) -> Option<(Vec3, f32, Rgb)> {
+        if let Some(v) = seen {
+            return v.sample(xi).map(|s| (s.direction, s.pdf, s.radiance));
+        }
         match self.strategy {
             Strategy::Bsdf => None,
             Strategy::Uniform => {
@@ -228,7 +293,10 @@ impl<'a> Integrator<'a> {
                 .as_ref()
                 .and_then(|c| c.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
-            Strategy::Product | Strategy::MisProduct => match (point, &self.compensated) {
+            Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility => match (
+                point,
+                &self.compensated,
+            ) {
                 (Some(p), _) => p.sample(xi),
                 (None, Some(c)) => c.sample(xi),
                 (None, None) => self.light.sample(xi),
@@ -300,15 +368,26 @@ impl<'a> Integrator<'a> {
             // and the compensated light costs a light sample
             // (PRODUCT_METAL_BELOW_ROUGHNESS).
             let on_the_fly = self.product.as_ref().is_some_and(|p| p.is_on_the_fly());
-            let light_here = self.strategy == Strategy::MisProduct
+            let light_here = self.strategy.mixes_product()
                 && !on_the_fly
                 && bsdf
                     .conductor_roughness()
                     .is_some_and(|a| a >= self.product_metals_below);
+            let factor = bsdf.product_factor(normal, -ray.direction);
             if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
-                point.set_factor(&bsdf.product_factor(normal, -ray.direction));
+                point.set_factor(&factor);
             }
             let point = scratch.point.as_ref().filter(|_| !light_here);
+            // `mis-visibility`: the cache's mixture where `mis-product` would take
+            // product samples, but at near-mirror metals (whose lobe, not the
+            // sky's visibility, decides where light comes from).
+            let seen_point = match &self.visibility {
+                Some(cache) if !light_here && bsdf.conductor_roughness().is_none() => {
+                    Some(cache.at(hit.point, &factor))
+                }
+                _ => None,
+            };
+            let seen = seen_point.as_ref();
             // The portals as seen from this vertex (their windows and powers; on the
             // stack, no allocation).
             let portal_point = self.portal.as_ref().map(|pl| pl.at(hit.point));
@@ -320,7 +399,7 @@ impl<'a> Integrator<'a> {
             // estimation there takes `DIFFUSE_PRODUCT_SAMPLES` product samples and
             // a BSDF-sampled ray that escapes counts 0 (so at the last vertex none
             // is traced); other vertices combine the two techniques.
-            let product_only = self.strategy == Strategy::MisProduct && bsdf.is_diffuse();
+            let product_only = self.strategy.mixes_product() && bsdf.is_diffuse();
             let (vertex_mis, light_samples) = if product_only {
                 (false, DIFFUSE_PRODUCT_SAMPLES)
             } else {
@@ -333,7 +412,7 @@ impl<'a> Integrator<'a> {
             for _ in 0..light_samples {
                 let xi_light = [rng.next_f32(), rng.next_f32()];
                 let Some((wi_world, light_pdf, le)) =
-                    self.sample_light_technique(xi_light, point, portal)
+                    self.sample_light_technique(xi_light, point, portal, seen)
                 else {
                     continue;
                 };
@@ -387,7 +466,10 @@ impl<'a> Integrator<'a> {
                 None => {
                     if counts_escape {
                         let weight = if vertex_mis {
-                            heuristic(bs.pdf, self.light_technique_pdf(wi_world, point, portal))
+                            heuristic(
+                                bs.pdf,
+                                self.light_technique_pdf(wi_world, point, portal, seen),
+                            )
                         } else {
                             1.0
                         };

@@ -29,6 +29,9 @@ pub struct RenderSettings {
     /// How the product strategies' sampler is built (the library's defaults unless
     /// a measurement asks otherwise).
     pub product: envlight::ProductOptions,
+    /// How `mis-visibility` builds its cache (the library's defaults unless a
+    /// measurement asks otherwise).
+    pub visibility: envlight::VisibilityOptions,
 }
 
 impl Default for RenderSettings {
@@ -41,6 +44,7 @@ impl Default for RenderSettings {
             strategy: Strategy::Mis,
             seed: 0,
             product: envlight::ProductOptions::default(),
+            visibility: envlight::VisibilityOptions::default(),
         }
     }
 }
@@ -113,19 +117,23 @@ pub fn render(
     render_with_error(scene, light, settings, progress).image
 }
 
-/// The integrator `settings` asks for.
+/// The integrator `settings` asks for, with what it learns before rendering
+/// (the visibility cache of `mis-visibility`, from this image's camera hits).
+/// The renders time it with the render: it is part of the strategy's cost.
 fn integrator_for<'a>(
     scene: &'a Scene,
     light: &'a EnvironmentLight,
     settings: &RenderSettings,
 ) -> Integrator<'a> {
-    Integrator::with_product_options(
+    let mut integrator = Integrator::with_product_options(
         scene,
         light,
         settings.strategy,
         settings.max_depth,
         settings.product,
-    )
+    );
+    integrator.learn_visibility(settings.width, settings.height, &settings.visibility);
+    integrator
 }
 
 /// As [`render`], also returning the per-pixel standard error.
@@ -135,9 +143,9 @@ pub fn render_with_error(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Rendered {
+    let start = Instant::now();
     let integrator = integrator_for(scene, light, settings);
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
-    let start = Instant::now();
     let rows = settings.height as u64;
     let done = AtomicU64::new(0);
     trace_pass(
@@ -166,11 +174,11 @@ pub fn render_for_time(
     seconds: f64,
     progress: &dyn Progress,
 ) -> Rendered {
+    let start = Instant::now();
     let integrator = integrator_for(scene, light, settings);
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let budget = Duration::from_secs_f64(seconds.max(0.0));
     let budget_ms = budget.as_millis() as u64;
-    let start = Instant::now();
     let mut spp = 0;
     while spp < settings.spp.max(1) {
         trace_pass(

@@ -20,6 +20,7 @@ use std::str::FromStr;
 /// | `mis-product` | product sampling (diffuse: alone; plastic, and metals of GGX α < 0.1 under the bilinear density: power heuristic); other metals: the compensated distribution, power heuristic | as the shadow ray |
 /// | `portal` | the portal light at the vertex, weight 1 | weight 0 |
 /// | `mis-portal` | the portal light at the vertex, balance heuristic | balance heuristic |
+/// | `mis-visibility` | as `mis-product`, with the product sampler replaced at diffuse and plastic vertices by the visibility cache's mixture (learned visibility × light × cosine, and the product) | as the shadow ray |
 ///
 /// The product strategies draw the shadow ray's direction at each vertex from
 /// [`envlight::ProductSampler`] with the target `L(ω) f(ω)`, where the factor `f` is
@@ -43,6 +44,13 @@ use std::str::FromStr;
 /// portals has no openings to restrict to: there the portal strategies sample the
 /// whole light (`portal` as `light`, `mis-portal` as `mis` with the balance
 /// heuristic).
+///
+/// `mis-visibility` builds a [`envlight::VisibilityCache`] before rendering,
+/// from the camera's first hits and the scene's own shadow rays (its cost counts
+/// in the render's time), and samples at each vertex the exact mixture of what
+/// the vertex's entry learned and the product sampler (docs/design.md §10): the
+/// pdf is positive wherever the product's is, so it is as unbiased as
+/// `mis-product`, whatever the cache saw.
 ///
 /// Camera rays that escape always see `light.radiance(ω)`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -70,11 +78,14 @@ pub enum Strategy {
     /// Portal sampling and BSDF sampling combined by the balance heuristic, both
     /// weights with the portal pdf at the shading point.
     MisPortal,
+    /// As `MisProduct`, the light technique at diffuse and plastic vertices being
+    /// the visibility cache's mixture at the vertex.
+    MisVisibility,
 }
 
 impl Strategy {
     /// All strategies, in the order reports list them.
-    pub const ALL: [Strategy; 9] = [
+    pub const ALL: [Strategy; 10] = [
         Strategy::Uniform,
         Strategy::Bsdf,
         Strategy::Light,
@@ -84,6 +95,7 @@ impl Strategy {
         Strategy::MisProduct,
         Strategy::Portal,
         Strategy::MisPortal,
+        Strategy::MisVisibility,
     ];
 
     /// The command-line name.
@@ -98,6 +110,7 @@ impl Strategy {
             Strategy::MisProduct => "mis-product",
             Strategy::Portal => "portal",
             Strategy::MisPortal => "mis-portal",
+            Strategy::MisVisibility => "mis-visibility",
         }
     }
 
@@ -112,7 +125,11 @@ impl Strategy {
     pub fn is_mis(self) -> bool {
         matches!(
             self,
-            Strategy::Mis | Strategy::MisCompensated | Strategy::MisProduct | Strategy::MisPortal
+            Strategy::Mis
+                | Strategy::MisCompensated
+                | Strategy::MisProduct
+                | Strategy::MisPortal
+                | Strategy::MisVisibility
         )
     }
 
@@ -125,7 +142,24 @@ impl Strategy {
     /// Whether the light technique is the product sampler at the shading point.
     #[inline]
     pub fn uses_product(self) -> bool {
-        matches!(self, Strategy::Product | Strategy::MisProduct)
+        matches!(
+            self,
+            Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility
+        )
+    }
+
+    /// Whether it mixes product (or cache) samples with BSDF samples the way
+    /// `mis-product` does: product samples alone at diffuse vertices, the
+    /// compensated light at rough metals.
+    #[inline]
+    pub fn mixes_product(self) -> bool {
+        matches!(self, Strategy::MisProduct | Strategy::MisVisibility)
+    }
+
+    /// Whether it builds a visibility cache before rendering.
+    #[inline]
+    pub fn uses_visibility(self) -> bool {
+        self == Strategy::MisVisibility
     }
 }
 
@@ -139,7 +173,7 @@ impl fmt::Display for Strategy {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown strategy '{0}' (expected one of: uniform, bsdf, light, mis, mis-compensated, \
-     product, mis-product, portal, mis-portal)"
+     product, mis-product, portal, mis-portal, mis-visibility)"
 )]
 pub struct UnknownStrategy(pub String);
 

@@ -69,7 +69,7 @@ pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
 pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
-pub use visibility::{VisibilityCache, VisibilityOptions};
+pub use visibility::{VisibilityCache, VisibilityOptions, VisibilitySummary};
 
 /// Whether a table built on first use (inside a `OnceLock`: portal sides, glossy
 /// product tables) may be built in parallel here. Not on a rayon worker: a caller's

@@ -126,6 +126,24 @@ pub struct RenderArgs {
     #[arg(long, hide = true)]
     product_on_the_fly: bool,
 
+    /// mis-visibility: the learned distribution's share of the mixture, in [0, 1)
+    /// (for measurements; default: the library's).
+    #[arg(long, value_name = "A", hide = true)]
+    visibility_share: Option<f32>,
+
+    /// mis-visibility: rays per entry and patch (for measurements).
+    #[arg(long, value_name = "N", hide = true)]
+    visibility_rays: Option<usize>,
+
+    /// mis-visibility: the number of entries the cache aims at (for measurements).
+    #[arg(long, value_name = "N", hide = true)]
+    visibility_entries: Option<usize>,
+
+    /// mis-visibility: the prior count of unoccluded rays per estimate (for
+    /// measurements).
+    #[arg(long, value_name = "A", hide = true)]
+    visibility_prior: Option<f32>,
+
     /// With --compare, the reference image (.exr or .pfm of the same size) instead of
     /// rendering one.
     #[arg(long, value_name = "FILE", requires = "compare")]
@@ -238,6 +256,16 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             patches: args.product_patches,
             on_the_fly: args.product_on_the_fly,
             ..Default::default()
+        },
+        visibility: {
+            let d = envlight::VisibilityOptions::default();
+            envlight::VisibilityOptions {
+                learned_share: args.visibility_share.unwrap_or(d.learned_share),
+                rays_per_patch: args.visibility_rays.unwrap_or(d.rays_per_patch),
+                target_entries: args.visibility_entries.unwrap_or(d.target_entries),
+                prior: args.visibility_prior.unwrap_or(d.prior),
+                ..d
+            }
         },
     };
     let bars = Bars::new();

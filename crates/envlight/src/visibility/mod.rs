@@ -53,7 +53,7 @@ use entries::Grid;
 use std::sync::Arc;
 
 /// How a [`VisibilityCache`] is built.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VisibilityOptions {
     /// Side of the cubic cells that group points into entries, in world units.
     /// `None`: chosen from the points, so that about
@@ -201,7 +201,7 @@ impl VisibilityCache {
             product,
             grid,
             entries: learned.entries,
-            options: options.clone(),
+            options: *options,
             rays: learned.rays,
         })
     }
