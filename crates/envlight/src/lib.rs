@@ -37,6 +37,11 @@
 //!   (the rows of [`Rotation::rows`]), and back through `TryFrom`, which rejects a
 //!   matrix that is not a rotation as [`Rotation::from_rows`] does.
 //! - `glam`: `Vec3` ⇄ `glam::Vec3`.
+//!
+//! One more, `variants`, is for the project's own tests and measurements, not for
+//! rendering: it adds `product::ProductVariant`, altered product samplers (the
+//! deliberately broken ones the verification harness must reject, and the
+//! on-the-fly product measured against the tables).
 #![warn(missing_docs)]
 
 pub mod alias;
@@ -66,7 +71,7 @@ pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
-pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
+pub use product::{Factor, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
 
 /// Whether a table built on first use (inside a `OnceLock`: portal sides, glossy

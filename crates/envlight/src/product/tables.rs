@@ -335,7 +335,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
 /// One node's weights over the patches: `P_k · max(f(centre_k), t · BOUND_SHARE · B_k)`
 /// (the floor rule, [`PatchBound::weight`]) with `B_k` the upper bound of the factor over patch `k` and over every direction
 /// within the cone `spread` (`(sin, cos)` of its half-angle; `None` for the whole
-/// sphere) about `axis` (just `f(centre_k)` for the broken [`PatchBound::AxisOnly`]),
+/// sphere) about `axis` (just `f(centre_k)` for the broken `PatchBound::AxisOnly`),
 /// as f32 relative to the largest, every positive weight kept positive. Patches
 /// marked in `skip` (the bright ones, weighted at each shading point instead) get
 /// none. `t ≤ 1` keeps what the floors add within [`FLOOR_BUDGET`] of the weight

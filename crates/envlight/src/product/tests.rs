@@ -940,7 +940,7 @@ fn on_the_fly_product_is_a_density() {
                 Arc::new(light),
                 ProductOptions {
                     patches: Some(patches),
-                    on_the_fly: true,
+                    variant: ProductVariant::OnTheFly,
                     ..Default::default()
                 },
             ),
