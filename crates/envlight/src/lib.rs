@@ -49,7 +49,6 @@ pub mod bilinear;
 pub mod builtin;
 pub mod color;
 pub mod distribution;
-pub mod equal_area;
 pub mod error;
 pub mod gpu;
 pub mod hierarchical;
@@ -65,6 +64,10 @@ pub mod product;
 pub mod rng;
 pub mod sun;
 mod width;
+
+// The equal-area map keeps the public path it had before the mappings were
+// gathered in `mapping`.
+pub use mapping::equal_area;
 
 pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};
