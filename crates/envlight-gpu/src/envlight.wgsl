@@ -656,7 +656,7 @@ fn uv_to_local(uv: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(sin_theta * phi.y, sin_theta * phi.x, theta.y);
 }
 
-// The equal-area octahedral square to the sphere (crates/envlight/src/equal_area.rs).
+// The equal-area octahedral square to the sphere (crates/envlight/src/mapping/equal_area.rs).
 fn square_to_sphere(uv: vec2<f32>) -> vec3<f32> {
     let a = 2.0 * unit_closed(uv.x) - 1.0;
     let b = 2.0 * unit_closed(uv.y) - 1.0;

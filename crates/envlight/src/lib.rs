@@ -37,6 +37,11 @@
 //!   (the rows of [`Rotation::rows`]), and back through `TryFrom`, which rejects a
 //!   matrix that is not a rotation as [`Rotation::from_rows`] does.
 //! - `glam`: `Vec3` ⇄ `glam::Vec3`.
+//!
+//! One more, `variants`, is for the project's own tests and measurements, not for
+//! rendering: it adds `product::ProductVariant`, altered product samplers (the
+//! deliberately broken ones the verification harness must reject, and the
+//! on-the-fly product measured against the tables).
 #![warn(missing_docs)]
 
 pub mod alias;
@@ -44,7 +49,6 @@ pub mod bilinear;
 pub mod builtin;
 pub mod color;
 pub mod distribution;
-pub mod equal_area;
 pub mod error;
 pub mod gpu;
 pub mod hierarchical;
@@ -62,12 +66,16 @@ pub mod sun;
 pub mod visibility;
 mod width;
 
+// The equal-area map keeps the public path it had before the mappings were
+// gathered in `mapping`.
+pub use mapping::equal_area;
+
 pub use distribution::{Distribution1D, Distribution2D};
 pub use error::{Error, Result, TexelPos};
 pub use image::{EnvImage, Lookup, Sanitized, WrapU};
 pub use light::{EnvironmentLight, LightOptions, LightSample};
 pub use math::{Rotation, Vec3};
-pub use product::{Factor, PatchBound, ProductOptions, ProductSampler, ShadingPoint};
+pub use product::{Factor, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
 pub use visibility::{VisibilityCache, VisibilityOptions, VisibilitySummary};
 

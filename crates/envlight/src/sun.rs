@@ -331,7 +331,7 @@ impl Grid {
             Mapping::EqualArea => {
                 let u = (x as f32 + 0.5) / self.w as f32;
                 let v = (y as f32 + 0.5) / self.h as f32;
-                let d = crate::equal_area::square_to_sphere(u, v);
+                let d = crate::mapping::equal_area::square_to_sphere(u, v);
                 normalize([d.x as f64, d.y as f64, d.z as f64]).unwrap_or([0.0, 0.0, 1.0])
             }
         }

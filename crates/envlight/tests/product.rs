@@ -14,9 +14,12 @@
 
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::{
-    EnvImage, EnvironmentLight, Factor, LightOptions, Lookup, PatchBound, ProductOptions,
-    ProductSampler, Rotation, Vec3,
+    EnvImage, EnvironmentLight, Factor, LightOptions, Lookup, ProductOptions, ProductSampler,
+    Rotation, Vec3,
 };
+// The broken samplers below are the `variants` feature's, which this crate's
+// tests get through envlight-verify.
+use envlight::product::ProductVariant;
 use envlight_verify::maps::{constant, hot, random};
 use envlight_verify::{
     self as verify, AtShadingPoint, Config, Grid, Integrand, Reference, SphereSample, SphereSampler,
@@ -383,7 +386,7 @@ fn broken_weight_at_the_node_only_is_rejected() {
     let sampler = ProductSampler::new(
         light,
         ProductOptions {
-            bound: PatchBound::AxisOnly,
+            variant: ProductVariant::AxisOnlyBound,
             normal_grid: Some(1),
             ..Default::default()
         },
@@ -411,7 +414,7 @@ fn broken_fold_without_the_mirror_image_is_rejected() {
         light,
         ProductOptions {
             patches: Some([1, 1]),
-            fold_without_mirror: true,
+            variant: ProductVariant::FoldWithoutMirror,
             ..Default::default()
         },
     );
@@ -473,7 +476,7 @@ fn broken_glossy_tables_without_the_cosine_are_rejected() {
     // but not the cosine under it, which at grazing angles cuts the lobe's lower
     // half and weights its upper half up.
     let options = ProductOptions {
-        glossy_without_tilt: true,
+        variant: ProductVariant::GlossyWithoutTilt,
         ..Default::default()
     };
     let below = grazing_glossy_below(options, GRAZING_GLOSSY_FLOOR);

@@ -254,7 +254,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         seed: args.seed,
         product: envlight::ProductOptions {
             patches: args.product_patches,
-            on_the_fly: args.product_on_the_fly,
+            variant: if args.product_on_the_fly {
+                envlight::product::ProductVariant::OnTheFly
+            } else {
+                envlight::product::ProductVariant::Tables
+            },
             ..Default::default()
         },
         visibility: {

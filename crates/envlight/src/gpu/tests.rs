@@ -577,7 +577,7 @@ impl Flat<'_> {
             let theta = PI * uv[1] as f64;
             (theta > 1e-3 && theta < PI - 1e-3).then_some((uv, 2.0 * PI * PI / csc as f64))
         } else {
-            Some((crate::equal_area::sphere_to_square(d), 4.0 * PI))
+            Some((crate::mapping::equal_area::sphere_to_square(d), 4.0 * PI))
         }
     }
 

@@ -6,7 +6,7 @@
 use super::{clear_of_cell_edges, solid_angle, EnvironmentLight, LightSample, Mapping, Planar};
 use crate::bilinear::{BilinearDistribution2D, CentredTables};
 use crate::distribution::{cell_indices, Distribution2D, Sample2D, STAGED_BLOCK};
-use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
+use crate::mapping::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::mapping::{directions_to_equirect_and_csc, radius_and_csc, EQUIRECT_JACOBIAN};
 use crate::math::{is_positive_finite, prefetch_ptr, Vec3};
 use crate::width::VectorWidth;

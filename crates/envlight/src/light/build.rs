@@ -8,10 +8,10 @@ use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
 use crate::distribution::{for_each_row, positive_weight, Distribution2D};
-use crate::equal_area;
 use crate::error::{Error, Result};
 use crate::hierarchical::Hierarchical2D;
 use crate::image::{EnvImage, Lookup, WrapU};
+use crate::mapping::equal_area;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 

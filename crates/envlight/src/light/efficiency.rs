@@ -3,8 +3,8 @@
 
 use super::build::{importance_row, LuminanceRows};
 use super::{EnvironmentLight, Mapping, Planar};
-use crate::equal_area::EQUAL_AREA_JACOBIAN;
 use crate::image::{Lookup, WrapU};
+use crate::mapping::equal_area::EQUAL_AREA_JACOBIAN;
 use crate::mapping::EQUIRECT_JACOBIAN;
 use crate::width::{at_width, VectorWidth};
 use rayon::prelude::*;

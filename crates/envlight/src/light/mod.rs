@@ -35,12 +35,9 @@ mod efficiency;
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::distribution::{cell_index, Distribution2D, Sample2D};
-use crate::equal_area::{self, EQUAL_AREA_JACOBIAN};
 use crate::hierarchical::Hierarchical2D;
-use crate::image::{EnvImage, Lookup, WrapU};
-use crate::mapping::{
-    direction_to_equirect_and_csc, equirect_to_direction, radius_and_csc, EQUIRECT_JACOBIAN,
-};
+use crate::image::{EnvImage, Lookup};
+pub use crate::mapping::Mapping;
 use crate::math::{is_positive_finite, Rotation, Vec3};
 use build::{importance_row, LuminanceRows};
 use std::f64::consts::PI;
@@ -85,17 +82,6 @@ pub enum Density {
     PiecewiseBilinear,
 }
 
-/// How image points map to directions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Mapping {
-    /// Latitude-longitude: `θ = π v`, `φ = 2π u` ([`crate::mapping`]).
-    #[default]
-    Equirectangular,
-    /// The equal-area octahedral square ([`crate::equal_area`]): constant Jacobian
-    /// `4π`, no pole singularity.
-    EqualArea,
-}
-
 impl Sampler {
     /// Every sampler, for option parsers and tests.
     pub const ALL: [Sampler; 3] = [Sampler::Inversion, Sampler::Alias, Sampler::Hierarchical];
@@ -134,73 +120,6 @@ impl Density {
     }
 }
 
-impl Mapping {
-    /// Every mapping, for option parsers and tests.
-    pub const ALL: [Mapping; 2] = [Mapping::Equirectangular, Mapping::EqualArea];
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Mapping::Equirectangular => "equirectangular",
-            Mapping::EqualArea => "equal-area",
-        }
-    }
-
-    /// How u behaves at the image's left and right edges.
-    fn wrap(self) -> WrapU {
-        match self {
-            Mapping::Equirectangular => WrapU::Periodic,
-            Mapping::EqualArea => WrapU::Clamp,
-        }
-    }
-
-    /// The unit direction at `uv` and `dω / du dv` there.
-    #[inline(always)]
-    fn to_direction(self, uv: [f32; 2]) -> (Vec3, f32) {
-        match self {
-            Mapping::Equirectangular => {
-                let (d, sin_theta) = equirect_to_direction(uv[0], uv[1]);
-                (d, EQUIRECT_JACOBIAN * sin_theta)
-            }
-            Mapping::EqualArea => (
-                equal_area::square_to_sphere(uv[0], uv[1]),
-                EQUAL_AREA_JACOBIAN,
-            ),
-        }
-    }
-
-    /// The image point looking along `d`, and `du dv / dω` there (the reciprocal
-    /// of the Jacobian; +∞ at the poles of the lat-long map).
-    #[inline(always)]
-    fn to_uv(self, d: Vec3) -> ([f32; 2], f32) {
-        match self {
-            Mapping::Equirectangular => {
-                let (uv, csc_theta) = direction_to_equirect_and_csc(d);
-                (uv, csc_theta * (1.0 / EQUIRECT_JACOBIAN))
-            }
-            Mapping::EqualArea => (equal_area::sphere_to_square(d), 1.0 / EQUAL_AREA_JACOBIAN),
-        }
-    }
-
-    /// `du dv / dω` at the light-frame direction `d`, bit for bit the second value
-    /// of [`Self::to_uv`], without the angles.
-    #[inline(always)]
-    fn inv_jacobian(self, d: Vec3) -> f32 {
-        match self {
-            Mapping::Equirectangular => radius_and_csc(d).1 * (1.0 / EQUIRECT_JACOBIAN),
-            Mapping::EqualArea => 1.0 / EQUAL_AREA_JACOBIAN,
-        }
-    }
-
-    /// The mapping's area factor `J` at image height `v`, relative to its maximum
-    /// (`sin θ` for lat-long, 1 for equal-area): what importance is multiplied by.
-    fn area_factor(self, v: f64) -> f64 {
-        match self {
-            Mapping::Equirectangular => (PI * v).sin(),
-            Mapping::EqualArea => 1.0,
-        }
-    }
-}
-
 /// How an [`EnvironmentLight`] is built and placed.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightOptions {
@@ -224,7 +143,7 @@ pub struct LightOptions {
     /// convention) or an equal-area square (as PBRT-v4 writes them).
     pub input_mapping: Mapping,
     /// Side of the equal-area square a lat-long input is resampled to; `None` keeps
-    /// about the input's texel count ([`equal_area::default_size`]).
+    /// about the input's texel count ([`crate::equal_area::default_size`]).
     pub equal_area_size: Option<usize>,
     /// MIS compensation (Karlík et al. 2019, as in PBRT-v4): sample
     /// `max(0, Y − Ȳ) · J` instead of `Y · J`, where `Ȳ` is the map's mean

@@ -155,18 +155,19 @@ impl Direction {
     }
 }
 
-/// How [`ProductSampler`](super::ProductSampler) weights a patch.
-#[doc(hidden)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PatchBound {
+/// How [`ProductSampler`](super::ProductSampler) weights a patch. Crate-private:
+/// the sampler always floors by the bound, unless built as the broken
+/// `ProductVariant::AxisOnlyBound` (the `variants` feature).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum PatchBound {
     /// Floored by a share of the upper bound of the factor over the patch and the
     /// node's neighbourhood: unbiased.
-    #[default]
     Cone,
     /// The factor at the patch's centre for the node's own direction only:
     /// **biased** (a patch beyond the node's horizon gets weight 0 while a
     /// neighbouring normal sees it lit). It exists so that tests can show that the
     /// invariant checks catch it.
+    #[cfg(feature = "variants")]
     AxisOnly,
 }
 
@@ -176,7 +177,7 @@ impl PatchBound {
     /// its `upper` bound over the patch (and, for a table, the node's
     /// neighbourhood), both `≥ 0`, `max(value, scale · BOUND_SHARE · upper)`
     /// where the bound is positive and 0 where it is not (the patch is wholly
-    /// past the horizon); the broken [`PatchBound::AxisOnly`] keeps `value`.
+    /// past the horizon); the broken `AxisOnly` keeps `value`.
     /// `scale ≤ 1` shrinks the share (a table's floor budget; 1 for a bright
     /// patch).
     #[inline(always)]
@@ -184,6 +185,7 @@ impl PatchBound {
         match self {
             PatchBound::Cone if upper > 0.0 => value.max(scale * BOUND_SHARE * upper),
             PatchBound::Cone => 0.0,
+            #[cfg(feature = "variants")]
             PatchBound::AxisOnly => value,
         }
     }

@@ -62,7 +62,7 @@ impl Bright {
     /// The patches of `fine` holding at least [`BRIGHT_SHARE`] of its light
     /// within [`BRIGHT_MAX_HALF_ANGLE`], at most [`MAX_BRIGHT`], brightest first
     /// (ties by index). With `every`, every lit patch instead (the on-the-fly
-    /// product of [`ProductOptions::on_the_fly`](super::ProductOptions::on_the_fly)).
+    /// product, `ProductVariant::OnTheFly` of the `variants` feature).
     pub fn new(fine: &Fine, every: bool) -> Self {
         let mut order: Vec<usize> = (0..fine.power.len())
             .filter(|&k| {

@@ -74,16 +74,18 @@ mod tables;
 #[cfg(test)]
 mod tests;
 mod tuning;
+mod variant;
 
-pub use bounds::PatchBound;
 pub use export::{BrightPatch, LatLongPatch, ProductTables};
 pub use factor::Factor;
 pub use tuning::{HORIZON_BAND, MIN_HORIZON_BAND};
+#[cfg(feature = "variants")]
+pub use variant::ProductVariant;
 
 use crate::distribution::CDF_ONE;
 use crate::light::{solid_angle_density, Density, EnvironmentLight, LightSample, Mapping};
 use crate::math::{is_positive_finite, Vec3, BELOW_ONE};
-use bounds::Direction;
+use bounds::{Direction, PatchBound};
 use bright::{Bright, Target};
 use factor::reflect;
 use fine::Fine;
@@ -91,6 +93,7 @@ use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 use tables::{Lobe, Mix, Tables};
 use tuning::{COSINE_FROM_ROUGHNESS, LOBE_GRID_SCALE, LOBE_ROUGHNESS, MAX_BRIGHT, TILT_GAIN};
+use variant::Variant;
 
 /// How a [`ProductSampler`] is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -111,29 +114,10 @@ pub struct ProductOptions {
     /// the narrowest twice as many. `None` for
     /// [`ProductOptions::DEFAULT_LOBE_GRID`].
     pub lobe_grid: Option<usize>,
-    /// Every lit patch weighted at each shading point by the factor itself (as the
-    /// bright patches are), none through the tables: an on-the-fly product over the
-    /// patch grid in the manner of Clarberg and Akenine-Möller (2008), with the
-    /// light's own density within a patch. Each shading point costs a bound of the
-    /// factor per patch and a sample a scan of the patches: for measurements
-    /// against the tables (BENCHMARKS.md), not for rendering.
-    #[doc(hidden)]
-    pub on_the_fly: bool,
-    /// How a patch's weight bounds the factor: always [`PatchBound::Cone`] except
-    /// in tests that prove the verification harness rejects the alternative.
-    #[doc(hidden)]
-    pub bound: PatchBound,
-    /// Whether the pdf within the horizon's band above the horizon holds the
-    /// mirror image's density: always except in a test that proves the
-    /// verification harness rejects the fold without it.
-    #[doc(hidden)]
-    pub fold_without_mirror: bool,
-    /// Whether a glossy factor looks its lobe's tables up at the mirror direction
-    /// itself, ignoring the cosine under the lobe: never except in a test that
-    /// proves an efficiency check catches it (the lookup is otherwise turned
-    /// towards the normal: `tilted_mirror` in the source).
-    #[doc(hidden)]
-    pub glossy_without_tilt: bool,
+    /// An altered sampler, for the verification harness's self-tests and for
+    /// measurements, not for rendering: only with the `variants` cargo feature.
+    #[cfg(feature = "variants")]
+    pub variant: ProductVariant,
 }
 
 impl ProductOptions {
@@ -215,12 +199,8 @@ pub struct ProductSampler {
     lobes: [OnceLock<Tables>; LOBE_ROUGHNESS.len()],
     /// Cells per side of the lobes' grids.
     lobe_grid: usize,
-    bound: PatchBound,
-    on_the_fly: bool,
-    /// [`ProductOptions::fold_without_mirror`].
-    fold_without_mirror: bool,
-    /// [`ProductOptions::glossy_without_tilt`].
-    glossy_without_tilt: bool,
+    /// Which sampler this is: the plain one but for tests and measurements.
+    variant: Variant,
 }
 
 impl ProductSampler {
@@ -237,12 +217,13 @@ impl ProductSampler {
         let lobe_grid = options
             .lobe_grid
             .unwrap_or(ProductOptions::DEFAULT_LOBE_GRID);
-        let bright = Bright::new(&fine, options.on_the_fly);
+        let variant = Variant::new(&options);
+        let bright = Bright::new(&fine, variant.on_the_fly());
         let cosine = Tables::new(
             &fine,
             normal_grid,
             Lobe::Cosine,
-            options.bound,
+            variant.bound(),
             &bright.mask(),
         );
         Self {
@@ -252,10 +233,7 @@ impl ProductSampler {
             cosine,
             lobes: Default::default(),
             lobe_grid,
-            bound: options.bound,
-            on_the_fly: options.on_the_fly,
-            fold_without_mirror: options.fold_without_mirror,
-            glossy_without_tilt: options.glossy_without_tilt,
+            variant,
         }
     }
 
@@ -275,17 +253,27 @@ impl ProductSampler {
                     &self.fine,
                     grid.max(1),
                     lobe,
-                    self.bound,
+                    self.bound(),
                     &self.bright.mask(),
                 )
             }),
         }
     }
 
-    /// Whether it was built with [`ProductOptions::on_the_fly`].
+    /// Whether it is the on-the-fly product, a sampler for measurements (the
+    /// `variants` feature's `ProductVariant::OnTheFly`): always false without
+    /// that feature. envlight-render asks, so that a render measuring it takes
+    /// product samples at every vertex rather than leaving rough metals to the
+    /// light.
     #[doc(hidden)]
     pub fn is_on_the_fly(&self) -> bool {
-        self.on_the_fly
+        self.variant.on_the_fly()
+    }
+
+    /// How its patches' weights are floored.
+    #[inline(always)]
+    fn bound(&self) -> PatchBound {
+        self.variant.bound()
     }
 
     /// The light sampled.
@@ -477,7 +465,7 @@ impl ProductSampler {
                     .take_while(|pair| roughness * roughness >= pair[0] * pair[1])
                     .count();
                 let mirror = reflect(outgoing, normal);
-                let lookup = if self.glossy_without_tilt {
+                let lookup = if self.variant.glossy_without_tilt() {
                     mirror
                 } else {
                     tilted_mirror(mirror, normal, roughness)
@@ -656,7 +644,7 @@ impl ShadingPoint<'_> {
         };
         let bright = sampler
             .bright
-            .weights(&target, sampler.bound, self.bright.as_mut());
+            .weights(&target, sampler.bound(), self.bright.as_mut());
         let lowest = sampler.bright.lowest_above(
             &normal,
             &self.bright.as_ref()[..sampler.bright.len()],
@@ -853,10 +841,10 @@ impl ShadingPoint<'_> {
     }
 
     /// [`Self::drawn_pdf`] at the mirror image of a direction within the band
-    /// above the horizon (0 for the broken `fold_without_mirror`).
+    /// above the horizon (0 for the broken `ProductVariant::FoldWithoutMirror`).
     #[inline]
     fn mirror_pdf(&self, mirror: Vec3) -> f32 {
-        if self.sampler.fold_without_mirror {
+        if self.sampler.variant.fold_without_mirror() {
             0.0
         } else {
             self.drawn_pdf(mirror)

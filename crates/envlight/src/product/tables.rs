@@ -23,6 +23,9 @@ use super::fine::Fine;
 use super::pick::{self, Slot};
 use super::tuning::{BOUNDARY_STEPS, BOUND_SHARE, CONE_SLACK, FLOOR_BUDGET};
 use crate::distribution::CDF_ONE;
+use crate::mapping::octahedral::{
+    octahedral_to_sphere, sphere_to_octahedral, OCTAHEDRAL_LIPSCHITZ,
+};
 use crate::math::{dot3, norm3, Vec3};
 use rayon::prelude::*;
 use std::f64::consts::FRAC_PI_2;
@@ -260,47 +263,6 @@ impl Tables {
     }
 }
 
-/// An upper bound of the arc length on the sphere per unit length in `[0, 1]²` of
-/// the octahedral map, 6. With `(a, b) = (2u - 1, 2v - 1)`, the map normalises
-/// `p = (a, b, 1 - |a| - |b|)` in the upper half (and the folded
-/// `((1 - |b|) sgn a, (1 - |a|) sgn b, 1 - |a| - |b|)` in the lower), whose
-/// components move by `|da|`, `|db|` and at most `|da| + |db|`, so
-/// `|dp| ≤ √3 |d(a, b)|`; `|p|₁ = 1` gives `|p| ≥ 1/√3`, and normalising moves a
-/// direction by at most `|dp| / |p|`: `|dω| ≤ 3 |d(a, b)| = 6 |d(u, v)|`.
-pub(super) const OCTAHEDRAL_LIPSCHITZ: f64 = 6.0;
-
-/// The grid point `[u, v] ∈ [0, 1]²` of the non-zero direction `d` in the
-/// octahedral map: `d / |d|₁` projected on the plane, the lower half folded
-/// over the diagonals. On a fold either equivalent point is returned.
-#[inline]
-pub(super) fn sphere_to_octahedral(d: Vec3) -> [f32; 2] {
-    let inv_l1 = 1.0 / (d.x.abs() + d.y.abs() + d.z.abs());
-    let (a, b) = (d.x * inv_l1, d.y * inv_l1);
-    let (a, b) = if d.z < 0.0 {
-        ((1.0 - b.abs()).copysign(a), (1.0 - a.abs()).copysign(b))
-    } else {
-        (a, b)
-    };
-    [
-        (0.5 * a + 0.5).clamp(0.0, 1.0),
-        (0.5 * b + 0.5).clamp(0.0, 1.0),
-    ]
-}
-
-/// The unit direction of grid point `[u, v] ∈ [0, 1]²` of the octahedral map (the
-/// inverse of [`sphere_to_octahedral`]), in f64.
-pub(super) fn octahedral_to_sphere(u: f64, v: f64) -> [f64; 3] {
-    let (a, b) = (2.0 * u - 1.0, 2.0 * v - 1.0);
-    let z = 1.0 - a.abs() - b.abs();
-    let (x, y) = if z < 0.0 {
-        ((1.0 - b.abs()).copysign(a), (1.0 - a.abs()).copysign(b))
-    } else {
-        (a, b)
-    };
-    let length = (x * x + y * y + z * z).sqrt();
-    [x / length, y / length, z / length]
-}
-
 /// Node `(a, b)` of an `n`-cell grid: its unit direction, and the sine and cosine
 /// of the half-angle of a cone about it holding every direction of the (up to
 /// 2 × 2) grid cells around it. The half-angle is the largest angle from the axis
@@ -335,7 +297,7 @@ pub(super) fn neighbourhood(n: usize, a: usize, b: usize) -> (Direction, Option<
 /// One node's weights over the patches: `P_k · max(f(centre_k), t · BOUND_SHARE · B_k)`
 /// (the floor rule, [`PatchBound::weight`]) with `B_k` the upper bound of the factor over patch `k` and over every direction
 /// within the cone `spread` (`(sin, cos)` of its half-angle; `None` for the whole
-/// sphere) about `axis` (just `f(centre_k)` for the broken [`PatchBound::AxisOnly`]),
+/// sphere) about `axis` (just `f(centre_k)` for the broken `PatchBound::AxisOnly`),
 /// as f32 relative to the largest, every positive weight kept positive. Patches
 /// marked in `skip` (the bright ones, weighted at each shading point instead) get
 /// none. `t ≤ 1` keeps what the floors add within [`FLOOR_BUDGET`] of the weight
