@@ -70,10 +70,3 @@ impl Patches<'_> {
         Some((k, planar, inv_jacobian))
     }
 }
-
-/// The plain octahedral map of a unit direction onto `[0, 1]²` (the grid of
-/// normals of the product's tables), for grouping normals elsewhere.
-#[inline]
-pub(crate) fn octahedral(d: Vec3) -> [f32; 2] {
-    super::tables::sphere_to_octahedral(d)
-}

@@ -3,7 +3,7 @@
 
 use super::{VisibilityError, VisibilityOptions};
 use crate::math::Vec3;
-use crate::product::patches::octahedral;
+use crate::mapping::octahedral::sphere_to_octahedral;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
@@ -125,7 +125,7 @@ impl Grid {
         };
         let (x, y, z) = (cell(p.x)?, cell(p.y)?, cell(p.z)?);
         let n = n.normalized()?;
-        let [s, t] = octahedral(n);
+        let [s, t] = sphere_to_octahedral(n);
         let b = self.bins as f32;
         let bin = ((s * b) as usize).min(self.bins - 1) * self.bins
             + ((t * b) as usize).min(self.bins - 1);
