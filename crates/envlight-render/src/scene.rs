@@ -78,7 +78,7 @@ pub struct Scene {
 }
 
 /// Names accepted by [`Scene::builtin`].
-pub const SCENE_NAMES: [&str; 4] = ["balls", "diffuse", "furnace", "room"];
+pub const SCENE_NAMES: [&str; 5] = ["balls", "diffuse", "furnace", "pergola", "room"];
 
 /// Albedo of the spheres in the `diffuse` scene.
 pub const DIFFUSE_SPHERE_ALBEDO: f32 = 0.8;
@@ -113,11 +113,18 @@ impl Scene {
     ///   low sun out).
     ///   Diffuse walls (ρ = 0.7), a checkered floor, a white diffuse sphere, a rough copper
     ///   sphere and a blue plastic sphere; the camera stands in a corner.
+    /// - `pergola`: a lattice roof over a 5 × 5 patch of ground, open on three
+    ///   sides with a wall on the fourth: two crossed layers of thin slats (0.12
+    ///   wide, 0.3 apart) at heights 2.4 and 2.45, so the sky and the sun reach the
+    ///   ground under it through some 280 small square gaps — light that no set of
+    ///   portals can describe. A white diffuse sphere and a blue plastic one stand
+    ///   under it on a large grey ground; the camera looks in from outside.
     pub fn builtin(name: &str) -> Option<Scene> {
         match name {
             "balls" => Some(Self::balls()),
             "diffuse" => Some(Self::diffuse()),
             "furnace" => Some(Self::furnace()),
+            "pergola" => Some(Self::pergola()),
             "room" => Some(Self::room()),
             _ => None,
         }
@@ -395,6 +402,87 @@ impl Scene {
         Scene {
             name: "diffuse".into(),
             camera: Self::ground_camera(),
+            objects,
+            portals: Vec::new(),
+        }
+    }
+
+    fn pergola() -> Scene {
+        const HALF: f32 = 2.5;
+        const SLAT: f32 = 0.12;
+        const PITCH: f32 = 0.3;
+        let wood = Material::Uniform(Bsdf::Diffuse {
+            albedo: [0.45, 0.35, 0.25],
+        });
+        let rect = |name: &'static str, corner: [f32; 3], u: [f32; 3], v: [f32; 3], material| {
+            Object {
+                name,
+                shape: Shape::Rect {
+                    corner: Vec3::from(corner),
+                    u: Vec3::from(u),
+                    v: Vec3::from(v),
+                },
+                material,
+            }
+        };
+        let mut objects = Vec::new();
+        let slats = (2.0 * HALF / PITCH) as usize;
+        for k in 0..=slats {
+            let at = -HALF + k as f32 * PITCH - SLAT / 2.0;
+            // Lower layer along y, upper layer along x: a lattice of square gaps.
+            let along_y = [at, -HALF, 2.4];
+            objects.push(rect("roof", along_y, [SLAT, 0.0, 0.0], [0.0, 2.0 * HALF, 0.0], wood));
+            let along_x = [-HALF, at, 2.45];
+            objects.push(rect("roof", along_x, [2.0 * HALF, 0.0, 0.0], [0.0, SLAT, 0.0], wood));
+        }
+        objects.push(rect(
+            "wall",
+            [-HALF, HALF, 0.0],
+            [2.0 * HALF, 0.0, 0.0],
+            [0.0, 0.0, 2.45],
+            Material::Uniform(Bsdf::Diffuse {
+                albedo: [0.7, 0.7, 0.7],
+            }),
+        ));
+        objects.push(Object {
+            name: "diffuse",
+            shape: Shape::Sphere {
+                center: Vec3::new(0.4, 0.6, 0.6),
+                radius: 0.6,
+            },
+            material: Material::Uniform(Bsdf::Diffuse {
+                albedo: [0.8, 0.8, 0.8],
+            }),
+        });
+        objects.push(Object {
+            name: "plastic",
+            shape: Shape::Sphere {
+                center: Vec3::new(-1.1, -0.4, 0.4),
+                radius: 0.4,
+            },
+            material: Material::Uniform(Bsdf::Plastic {
+                albedo: [0.1, 0.25, 0.6],
+                alpha: 0.08,
+                eta: 1.5,
+            }),
+        });
+        objects.push(Object {
+            name: "ground",
+            shape: Shape::Disc {
+                center: Vec3::new(0.0, 0.0, 0.0),
+                radius: 30.0,
+            },
+            material: Material::Uniform(Bsdf::Diffuse {
+                albedo: [0.5, 0.5, 0.5],
+            }),
+        });
+        Scene {
+            name: "pergola".into(),
+            camera: Camera {
+                position: Vec3::new(1.2, -4.6, 1.2),
+                look_at: Vec3::new(-0.2, 0.6, 0.6),
+                vfov_degrees: 60.0,
+            },
             objects,
             portals: Vec::new(),
         }
