@@ -374,13 +374,10 @@ impl<'a> Integrator<'a> {
                     .conductor_roughness()
                     .is_some_and(|a| a >= self.product_metals_below);
             let factor = bsdf.product_factor(normal, -ray.direction);
-            if let (Some(point), false) = (scratch.point.as_mut(), light_here) {
-                point.set_factor(&factor);
-            }
-            let point = scratch.point.as_ref().filter(|_| !light_here);
             // `mis-visibility`: the cache's mixture where `mis-product` would take
             // product samples, but at near-mirror metals (whose lobe, not the
-            // sky's visibility, decides where light comes from).
+            // sky's visibility, decides where light comes from). It holds its own
+            // product shading point.
             let seen_point = match &self.visibility {
                 Some(cache) if !light_here && bsdf.conductor_roughness().is_none() => {
                     Some(cache.at(hit.point, &factor))
@@ -388,6 +385,11 @@ impl<'a> Integrator<'a> {
                 _ => None,
             };
             let seen = seen_point.as_ref();
+            let product_here = !light_here && seen.is_none();
+            if let (Some(point), true) = (scratch.point.as_mut(), product_here) {
+                point.set_factor(&factor);
+            }
+            let point = scratch.point.as_ref().filter(|_| product_here);
             // The portals as seen from this vertex (their windows and powers; on the
             // stack, no allocation).
             let portal_point = self.portal.as_ref().map(|pl| pl.at(hit.point));

@@ -167,12 +167,21 @@ pub(crate) fn entry(
     patches: &Patches<'_>,
     options: &VisibilityOptions,
 ) -> Entry {
+    let (mut seen, mut facing) = (0.0f64, 0.0f64);
     let weights: Vec<f32> = (0..visibility.len())
-        .map(|k| (visibility[k] as f64 * patches.power(k) * bound[k] as f64) as f32)
+        .map(|k| {
+            let unoccluded = patches.power(k) * bound[k] as f64;
+            facing += unoccluded;
+            seen += visibility[k] as f64 * unoccluded;
+            (visibility[k] as f64 * unoccluded) as f32
+        })
         .collect();
     let distribution = Distribution1D::new(&weights);
-    let share = if distribution.integral() > 0.0 {
-        options.learned_share
+    // `V̄`, the share of the light the entry faces that it sees: where it sees
+    // all of it the product sampler (whose tables follow each normal closely)
+    // is the better sampler; the less it sees, the more the learned one wins.
+    let share = if distribution.integral() > 0.0 && facing > 0.0 {
+        (options.learned_share as f64 * (1.0 - seen / facing)).clamp(0.0, 1.0) as f32
     } else {
         0.0
     };

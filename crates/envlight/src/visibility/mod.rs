@@ -29,7 +29,11 @@
 //! p(ω | x, n) = α_e q_e(ω) + (1 − α_e) p_prod(ω | n)
 //! ```
 //!
-//! with the product sampler's own density `p_prod` (docs/design.md §6a). Since
+//! with the product sampler's own density `p_prod` (docs/design.md §6a) and
+//! `α_e = α (1 − V̄_e)`, `V̄_e = Σ V̂_e[k] P_k C_e[k] / Σ P_k C_e[k]` the share of
+//! the light the entry faces that it sees (`α` is
+//! [`VisibilityOptions::learned_share`]): where nothing is in the way the product
+//! sampler, whose tables follow each normal, serves alone. Since
 //! `p_prod > 0` wherever `L · cos⁺ > 0`, so is `p`: a window the rays missed still
 //! gets samples, at least the share `1 − α_e` of the product's. A point with no
 //! entry (or an entry that faces no lit patch, `α_e = 0`) samples `p_prod` alone.
@@ -68,7 +72,11 @@ pub struct VisibilityOptions {
     pub memory_budget: usize,
     /// Rays per entry and lit patch it can face.
     pub rays_per_patch: usize,
-    /// `α`: the learned distribution's share of the mixture, in `[0, 1)`.
+    /// `α`: the learned distribution's largest share of the mixture, in
+    /// `[0, 1)`. An entry's share is `α (1 − V̄_e)`, `V̄_e` the share of the
+    /// light it faces that it sees (module docs): the product sampler alone
+    /// where nothing is in the way, mostly the learned distribution where most
+    /// of the sky is hidden.
     pub learned_share: f32,
     /// `a`: the prior count of unoccluded rays in each visibility estimate
     /// (`> 0`, so no estimate is 0).
@@ -85,7 +93,7 @@ impl Default for VisibilityOptions {
             target_entries: 512,
             memory_budget: 64 << 20,
             rays_per_patch: 4,
-            learned_share: 0.5,
+            learned_share: 0.9,
             prior: 0.1,
             seed: 0x5eed_0f_5c7,
         }
