@@ -15,6 +15,10 @@ Large batch outputs (256 KiB and up) live in buffers that go back to a small
 cache when their arrays are freed, so that the next batch call does not pay for
 fresh pages (at most 8 buffers, 512 MiB); ``release_buffers()`` empties it.
 
+The light's options are keywords of the constructors (``help(EnvironmentLight)``);
+``SAMPLERS``, ``DENSITIES``, ``MAPPINGS``, ``LOOKUPS`` and ``RADIANCE_FORMATS`` are
+the names each accepts, as the library spells them.
+
 ``envlight.mitsuba.register()`` adds the light to Mitsuba 3 as the emitter type
 ``"envlight"`` (see ``help(envlight.mitsuba)``).
 
@@ -33,6 +37,24 @@ u = 0, v = 0.5        (1, 0, 0)        (0, 0, -1)
 ====================  ===============  ===============
 """
 
-from ._native import EnvironmentLight, __version__, release_buffers
+from ._native import (
+    DENSITIES,
+    LOOKUPS,
+    MAPPINGS,
+    RADIANCE_FORMATS,
+    SAMPLERS,
+    EnvironmentLight,
+    __version__,
+    release_buffers,
+)
 
-__all__ = ["EnvironmentLight", "__version__", "release_buffers"]
+__all__ = [
+    "DENSITIES",
+    "EnvironmentLight",
+    "LOOKUPS",
+    "MAPPINGS",
+    "RADIANCE_FORMATS",
+    "SAMPLERS",
+    "__version__",
+    "release_buffers",
+]

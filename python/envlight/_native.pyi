@@ -16,6 +16,13 @@ _Mapping = Literal["equirectangular", "equal-area"]
 _Lookup = Literal["bilinear", "nearest", "node"]
 _Frame = Literal["z-up", "y-up"]
 
+# The names each option accepts, in the library's order (its ALL).
+SAMPLERS: Tuple[_Sampler, ...]
+DENSITIES: Tuple[_Density, ...]
+MAPPINGS: Tuple[_Mapping, ...]
+LOOKUPS: Tuple[_Lookup, ...]
+RADIANCE_FORMATS: Tuple[Literal["f32", "f16"], ...]
+
 class EnvironmentLight:
     """An importance-sampled environment light (an HDR panorama at infinity)."""
 
@@ -25,12 +32,15 @@ class EnvironmentLight:
         *,
         sampler: _Sampler = "inversion",
         density: Optional[_Density] = None,
-        mapping: _Mapping = "equirectangular",
+        mapping: Optional[_Mapping] = None,
+        input_mapping: _Mapping = "equirectangular",
         lookup: _Lookup = "bilinear",
         rotate: float = 0.0,
         scale: float = 1.0,
         frame: _Frame = "z-up",
         table_width: Optional[int] = None,
+        equal_area_size: Optional[int] = None,
+        mis_compensation: bool = False,
     ) -> None:
         """Loads a map (.hdr, .exr, .pfm, or 8-bit .png/.jpg).
 
@@ -39,29 +49,53 @@ class EnvironmentLight:
         only density the alias and hierarchical samplers and a reduced table
         take).
 
+        mapping: the parameterization the light samples and looks up in; None (the
+        default) takes input_mapping's. A lat-long map lit with "equal-area" is
+        resampled to an equal-area square.
+
+        input_mapping: what the map is: "equirectangular" (a lat-long panorama) or
+        "equal-area" (an octahedral square as PBRT-v4 writes them: it must be
+        square, and is lit with the equal-area mapping only).
+
+        equal_area_size: the side of the square a lat-long map is resampled to for
+        mapping="equal-area" (at least 1); None keeps about the map's texel count.
+
         table_width: build the sampling table this many cells wide instead of one
         cell per texel (each cell sums a block of texels' filtered importance, so
         every lit texel keeps a positive density; radiance stays at full
         resolution). It must reduce the width and height by the same whole factor;
         piecewise-constant density only.
 
+        mis_compensation: sample max(0, Y - mean) instead of the luminance Y (MIS
+        compensation, as in PBRT-v4). The density is then 0 wherever the map is at
+        or below its mean, so the light alone no longer covers the sphere: use it
+        only as one technique of MIS with BSDF sampling. A map with nothing above
+        its mean keeps the ordinary density.
+
+        The accepted names are SAMPLERS, DENSITIES, MAPPINGS and LOOKUPS.
+
         Raises FileNotFoundError for a missing file, OSError for one that cannot be
         read or decoded, ValueError for a NaN or infinite texel (naming it), an
-        unknown option or a table width that does not fit."""
+        unknown name or a combination of options the library refuses (naming the
+        keyword), or a table width that does not fit."""
     @staticmethod
     def from_array(
         rgb: _F32,
         *,
         sampler: _Sampler = "inversion",
         density: Optional[_Density] = None,
-        mapping: _Mapping = "equirectangular",
+        mapping: Optional[_Mapping] = None,
+        input_mapping: _Mapping = "equirectangular",
         lookup: _Lookup = "bilinear",
         rotate: float = 0.0,
         scale: float = 1.0,
         frame: _Frame = "z-up",
         table_width: Optional[int] = None,
+        equal_area_size: Optional[int] = None,
+        mis_compensation: bool = False,
     ) -> "EnvironmentLight":
-        """A light from an (H, W, 3) float32 array of linear RGB (row 0 at the top)."""
+        """A light from an (H, W, 3) float32 array of linear RGB (row 0 at the top),
+        with the options of the constructor."""
     def sample(self, u: _F32) -> Tuple[_F32, _F32, _F32]:
         """(directions (N, 3), pdf (N,), radiance (N, 3)) for u of shape (N, 2).
 

@@ -46,10 +46,13 @@ from ._drjit_tables import TableLight
 __all__ = ["register"]
 
 SAMPLINGS = ("light", "product")
-SAMPLERS = ("inversion",)
-DENSITIES = ("piecewise-constant", "piecewise-bilinear")
-MAPPINGS = ("equirectangular", "equal-area")
-LOOKUPS = ("node", "bilinear", "nearest")
+# The light's option names come from the library. The Dr.Jit port evaluates the
+# inversion sampler's tables only (alias is not ported, hierarchical not
+# exported: see _drjit_tables), so the emitter takes that one of them.
+SAMPLERS = tuple(s for s in _native.SAMPLERS if s == "inversion")
+DENSITIES = _native.DENSITIES
+MAPPINGS = _native.MAPPINGS
+LOOKUPS = _native.LOOKUPS
 
 _classes = {}
 

@@ -370,3 +370,80 @@ def test_pooled_outputs_are_independent_and_recycled():
     del d4, p4, l4
     assert envlight.release_buffers() > 0
     assert envlight.release_buffers() == 0
+
+
+def test_option_names_are_the_librarys():
+    assert envlight.SAMPLERS == ("inversion", "alias", "hierarchical")
+    assert envlight.DENSITIES == ("piecewise-constant", "piecewise-bilinear")
+    assert envlight.MAPPINGS == ("equirectangular", "equal-area")
+    assert envlight.LOOKUPS == ("nearest", "bilinear", "node")
+    assert envlight.RADIANCE_FORMATS == ("f32", "f16")
+    rgb = sky()
+    # An unknown name is a ValueError naming the keyword and every accepted name.
+    for keyword, names in (
+        ("sampler", envlight.SAMPLERS),
+        ("density", envlight.DENSITIES),
+        ("mapping", envlight.MAPPINGS),
+        ("input_mapping", envlight.MAPPINGS),
+        ("lookup", envlight.LOOKUPS),
+    ):
+        with pytest.raises(ValueError, match=f"^{keyword} must be one of") as e:
+            envlight.EnvironmentLight.from_array(rgb, **{keyword: "bogus"})
+        assert all(name in str(e.value) for name in names), e.value
+    with pytest.raises(ValueError, match="^radiance must be one of f32, f16"):
+        envlight.EnvironmentLight.from_array(rgb).gpu_tables(radiance="f8")
+    # The library's validation, naming the keyword.
+    for kw, keyword in (
+        (dict(scale=-1.0), "scale"),
+        (dict(rotate=float("inf")), "rotate"),
+        (dict(sampler="hierarchical", density="piecewise-bilinear"), "density"),
+        (dict(lookup="node", mapping="equal-area"), "lookup"),
+        (dict(input_mapping="equal-area", mapping="equirectangular"), "input_mapping"),
+        (dict(mapping="equal-area", equal_area_size=0), "equal_area_size"),
+        (dict(table_width=0), "table_width"),
+    ):
+        with pytest.raises(ValueError, match=f"^{keyword}: "):
+            envlight.EnvironmentLight.from_array(rgb, **kw)
+
+
+def test_input_mapping_and_equal_area_size():
+    rgb = sky()
+    h, w, _ = rgb.shape
+    # A lat-long map resampled to a square of the size asked for, or about its
+    # texel count.
+    sized = envlight.EnvironmentLight.from_array(rgb, mapping="equal-area", equal_area_size=24)
+    assert (sized.width, sized.height) == (24, 24)
+    default = envlight.EnvironmentLight.from_array(rgb, mapping="equal-area")
+    assert abs(default.width / np.sqrt(w * h) - 1) < 0.05 and default.width == default.height
+    # A square given as an equal-area input is lit as it is: mapping follows
+    # input_mapping when left out.
+    square = np.ascontiguousarray(rgb[:24, :24])
+    given = envlight.EnvironmentLight.from_array(square, input_mapping="equal-area")
+    assert (given.width, given.height) == (24, 24) and "equal-area" in repr(given)
+    d, p, _ = given.sample(uniform_u(1000))
+    assert np.allclose(given.pdf(d), p, rtol=1e-3)
+    # The equal-area size does not change a light that resamples nothing.
+    plain = envlight.EnvironmentLight.from_array(rgb)
+    assert envlight.EnvironmentLight.from_array(rgb, equal_area_size=24).width == plain.width
+    # A non-square equal-area input is refused, naming its size.
+    with pytest.raises(ValueError, match=f"square.*{w}x{h}"):
+        envlight.EnvironmentLight.from_array(rgb, input_mapping="equal-area")
+
+
+def test_mis_compensation_samples_only_above_the_mean():
+    rgb = sky()
+    plain = envlight.EnvironmentLight.from_array(rgb)
+    compensated = envlight.EnvironmentLight.from_array(rgb, mis_compensation=True)
+    d, p, _ = compensated.sample(uniform_u(4000))
+    lit = p > 0
+    assert lit.all() and np.allclose(compensated.pdf(d), p, rtol=1e-3)
+    # Uniform directions: some land where the map is at or below its mean, which
+    # the compensated density leaves to BSDF sampling, and the plain one does not.
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(4000, 3)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    assert (compensated.pdf(v) == 0).mean() > 0.2
+    assert (plain.pdf(v) == 0).mean() < 0.01
+    # The radiance and its integral do not change, only the density.
+    assert np.array_equal(compensated.radiance(v), plain.radiance(v))
+    assert compensated.integral_rgb == plain.integral_rgb

@@ -1,7 +1,9 @@
 //! How a light is built: the C options, their defaults, and their conversion to
-//! the library's `LightOptions` with every field checked.
+//! the library's `LightOptions`: the C encodings (enum codes, flags, the reserved
+//! words, the rotation matrix) checked here, the options themselves by
+//! `LightOptions::validate`.
 
-use envlight::light::{Density, Mapping, Sampler};
+use envlight::light::{Density, Mapping, NamedOption, OptionError, Sampler};
 use envlight::{LightOptions, Lookup, Rotation};
 
 use crate::boundary::{deref, Failure};
@@ -117,23 +119,33 @@ pub extern "C" fn envlight_light_options_default() -> envlight_light_options {
     }
 }
 
+/// The C name of the `LightOptions` field an [`OptionError`] names.
+fn c_field(e: &OptionError) -> &'static str {
+    match e.field() {
+        // The matrix is checked as it is converted, so a rotation that is not
+        // finite came from the angle.
+        "rotation" => "rotate_deg",
+        field => field,
+    }
+}
+
 /// The library's options from C's, or an invalid-argument failure naming the field.
 pub(crate) fn light_options(
     o: &envlight_light_options,
     function: &str,
 ) -> Result<LightOptions, Failure> {
-    fn pick<T: Copy>(
+    /// The value whose C code is `code`: its index in `order`.
+    fn pick<T: NamedOption>(
         function: &str,
         field: &str,
         code: u32,
-        all: &[T],
-        name: impl Fn(T) -> &'static str,
+        order: &[T],
     ) -> Result<T, Failure> {
-        all.get(code as usize).copied().ok_or_else(|| {
-            let names: Vec<String> = all
+        order.get(code as usize).copied().ok_or_else(|| {
+            let names: Vec<String> = order
                 .iter()
                 .enumerate()
-                .map(|(k, &t)| format!("{k} {}", name(t)))
+                .map(|(k, &t)| format!("{k} {}", t.option_name()))
                 .collect();
             Failure::argument(
                 function,
@@ -141,34 +153,18 @@ pub(crate) fn light_options(
             )
         })
     }
-    // The orders of the C enums.
-    let sampler = pick(function, "sampler", o.sampler, &Sampler::ALL, Sampler::name)?;
-    let density = pick(function, "density", o.density, &Density::ALL, Density::name)?;
-    let mapping = pick(function, "mapping", o.mapping, &Mapping::ALL, Mapping::name)?;
-    let input_mapping = pick(
-        function,
-        "input_mapping",
-        o.input_mapping,
-        &Mapping::ALL,
-        Mapping::name,
-    )?;
+    // The orders of the C enums: the library's own for the sampler, density and
+    // mapping; the lookup's C codes put the default, bilinear, first.
+    let sampler = pick(function, "sampler", o.sampler, &Sampler::ALL)?;
+    let density = pick(function, "density", o.density, &Density::ALL)?;
+    let mapping = pick(function, "mapping", o.mapping, &Mapping::ALL)?;
+    let input_mapping = pick(function, "input_mapping", o.input_mapping, &Mapping::ALL)?;
     let lookup = pick(
         function,
         "lookup",
         o.lookup,
         &[Lookup::Bilinear, Lookup::Nearest, Lookup::Node],
-        |l| match l {
-            Lookup::Bilinear => "bilinear",
-            Lookup::Nearest => "nearest",
-            Lookup::Node => "node",
-        },
     )?;
-    if !o.rotate_deg.is_finite() {
-        return Err(Failure::argument(
-            function,
-            format_args!("options.rotate_deg must be finite, not {}", o.rotate_deg),
-        ));
-    }
     let mut rotation = Rotation::about_z_degrees(o.rotate_deg);
     if o.rotation != [[0.0; 3]; 3] {
         let matrix = Rotation::from_rows(o.rotation).ok_or_else(|| {
@@ -181,12 +177,6 @@ pub(crate) fn light_options(
             )
         })?;
         rotation = rotation.then_after(matrix);
-    }
-    if !(o.scale.is_finite() && o.scale >= 0.0) {
-        return Err(Failure::argument(
-            function,
-            format_args!("options.scale must be finite and >= 0, not {}", o.scale),
-        ));
     }
     if o.mis_compensation > 1 {
         return Err(Failure::argument(
@@ -204,7 +194,7 @@ pub(crate) fn light_options(
         ));
     }
     let nonzero = |v: u32| (v != 0).then_some(v as usize);
-    Ok(LightOptions {
+    let options = LightOptions {
         scale: o.scale,
         rotation,
         lookup,
@@ -215,7 +205,11 @@ pub(crate) fn light_options(
         equal_area_size: nonzero(o.equal_area_size),
         mis_compensation: o.mis_compensation == 1,
         table_width: nonzero(o.table_width),
-    })
+    };
+    options
+        .validate()
+        .map_err(|e| Failure::argument(function, format_args!("options.{}: {e}", c_field(&e))))?;
+    Ok(options)
 }
 
 /// The options at `options` (the defaults for NULL).

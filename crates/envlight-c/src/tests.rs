@@ -238,6 +238,29 @@ fn bad_arguments_are_statuses_with_messages() {
             },
             "options.rotation",
         ),
+        // The library's validation, under the C field names.
+        (
+            envlight_light_options {
+                rotate_deg: f32::INFINITY,
+                ..envlight_light_options_default()
+            },
+            "options.rotate_deg",
+        ),
+        (
+            envlight_light_options {
+                sampler: envlight_sampler::ENVLIGHT_SAMPLER_ALIAS as u32,
+                ..envlight_light_options_default()
+            },
+            "options.density: the piecewise-bilinear density",
+        ),
+        (
+            envlight_light_options {
+                lookup: envlight_lookup::ENVLIGHT_LOOKUP_NODE as u32,
+                mapping: envlight_mapping::ENVLIGHT_MAPPING_EQUAL_AREA as u32,
+                ..envlight_light_options_default()
+            },
+            "options.lookup: the node lookup",
+        ),
     ] {
         assert_eq!(
             envlight_light_from_rgb(rgb.as_ptr(), w, h, &options, &mut light),

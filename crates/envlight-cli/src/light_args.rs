@@ -6,8 +6,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, Context};
-use clap::ValueEnum;
-use envlight::light::{Density, Mapping, Sampler};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+use envlight::light::{Density, Mapping, NamedOption, OptionError, Sampler};
 use envlight::load::{LoadOptions, DEFAULT_MAX_TEXELS};
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation, Sanitized};
 
@@ -35,12 +35,13 @@ pub struct LightArgs {
     pub scale: f32,
 
     /// Radiance reconstruction between texel centres.
-    #[arg(long, value_enum, default_value_t = LookupArg::Bilinear)]
-    pub lookup: LookupArg,
+    #[arg(long, default_value_t = Lookup::Bilinear, value_parser = choices(lookup_help))]
+    pub lookup: Lookup,
 
     /// How directions are drawn from the density (all give the same density).
-    #[arg(long, value_name = "NAME", value_enum, default_value_t = SamplerArg::Inversion)]
-    pub sampler: SamplerArg,
+    #[arg(long, value_name = "NAME", default_value_t = Sampler::Inversion,
+          value_parser = choices(sampler_help))]
+    pub sampler: Sampler,
 
     /// The shape of the sampling density over the map [default: piecewise-bilinear
     /// with --sampler inversion and no --table-size, else piecewise-constant].
@@ -49,20 +50,21 @@ pub struct LightArgs {
     /// 1.4-1.6x the constant one's; piecewise-constant is the smallest (6 bytes per
     /// texel) and cheapest, and the only one the alias and hierarchical samplers
     /// and --table-size take.
-    #[arg(long, value_name = "NAME", value_enum)]
-    pub density: Option<DensityArg>,
+    #[arg(long, value_name = "NAME", value_parser = choices(density_help))]
+    pub density: Option<Density>,
 
     /// The parameterization the light samples and looks up in [default: the same as
     /// --input-mapping]. A lat-long map lit with equal-area is resampled to an
     /// equal-area square (--equal-area-size); an equal-area map can only be lit
     /// with equal-area.
-    #[arg(long, value_name = "NAME", value_enum)]
-    pub mapping: Option<MappingArg>,
+    #[arg(long, value_name = "NAME", value_parser = choices(mapping_help))]
+    pub mapping: Option<Mapping>,
 
     /// What MAP is: a lat-long panorama, or an equal-area octahedral square (as
     /// PBRT-v4 writes them; must be square).
-    #[arg(long, value_name = "NAME", value_enum, default_value_t = MappingArg::Equirectangular)]
-    pub input_mapping: MappingArg,
+    #[arg(long, value_name = "NAME", default_value_t = Mapping::Equirectangular,
+          value_parser = choices(mapping_help))]
+    pub input_mapping: Mapping,
 
     /// Side N of the N×N equal-area square a lat-long map is resampled to for
     /// --mapping equal-area [default: about the map's texel count, √(w h) rounded
@@ -89,101 +91,116 @@ pub struct LightArgs {
     pub sanitize: bool,
 }
 
-/// `--lookup`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum LookupArg {
-    /// The texel containing the direction.
-    Nearest,
-    /// Bilinear interpolation (lat-long: u wraps, v clamps; equal-area: both
-    /// clamp); the importance is blurred by [1 6 1]/8 so every lit direction can be
-    /// sampled.
-    Bilinear,
-    /// Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)),
-    /// as Mitsuba 3's envmap reads a map; lat-long maps (the piecewise-bilinear
-    /// density puts its nodes on those rows).
-    Node,
+/// The value parser of an option the library names ([`NamedOption`]): its names,
+/// in the library's order, are the possible values, each shown with `help`'s
+/// text in `--help`; the chosen name is parsed back with the library's parser.
+pub fn choices<T>(help: fn(T) -> &'static str) -> impl TypedValueParser<Value = T>
+where
+    T: NamedOption + Send + Sync,
+{
+    PossibleValuesParser::new(
+        T::VALUES
+            .iter()
+            .map(|&v| PossibleValue::new(v.option_name()).help(help(v))),
+    )
+    .try_map(|name| T::from_name(&name))
 }
 
-/// `--sampler`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum SamplerArg {
-    /// CDF inversion: a row from the marginal, then a column from that row. Keeps
-    /// stratification; invertible.
-    Inversion,
-    /// Vose's alias table: O(1) per sample, but breaks stratification and has no
-    /// inverse.
-    Alias,
-    /// Hierarchical warping down a pyramid of sums: keeps stratification;
-    /// invertible.
-    Hierarchical,
-}
-
-impl SamplerArg {
-    /// The library's sampler.
-    pub fn to_library(self) -> Sampler {
-        match self {
-            Self::Inversion => Sampler::Inversion,
-            Self::Alias => Sampler::Alias,
-            Self::Hierarchical => Sampler::Hierarchical,
+/// `--lookup`'s values, as `--help` explains them.
+fn lookup_help(lookup: Lookup) -> &'static str {
+    match lookup {
+        Lookup::Nearest => "The texel containing the direction",
+        Lookup::Bilinear => {
+            "Bilinear interpolation (lat-long: u wraps, v clamps; equal-area: both clamp); \
+             the importance is blurred by [1 6 1]/8 so every lit direction can be sampled"
+        }
+        Lookup::Node => {
+            "Bilinear with the rows as nodes from pole to pole (row j at v = j/(h-1)), as \
+             Mitsuba 3's envmap reads a map; lat-long maps (the piecewise-bilinear density \
+             puts its nodes on those rows)"
         }
     }
 }
 
-/// `--density`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum DensityArg {
-    /// Constant over each texel (in image space), ∝ filtered luminance × the
-    /// mapping's area factor.
-    PiecewiseConstant,
-    /// Bilinear between texel centres, ∝ the bilinear radiance reconstruction's
-    /// luminance × the area factor (sampled by inversion only).
-    PiecewiseBilinear,
-}
-
-impl DensityArg {
-    /// The library's density.
-    pub fn to_library(self) -> Density {
-        match self {
-            Self::PiecewiseConstant => Density::PiecewiseConstant,
-            Self::PiecewiseBilinear => Density::PiecewiseBilinear,
+/// `--sampler`'s values, as `--help` explains them.
+fn sampler_help(sampler: Sampler) -> &'static str {
+    match sampler {
+        Sampler::Inversion => {
+            "CDF inversion: a row from the marginal, then a column from that row. Keeps \
+             stratification; invertible"
         }
-    }
-
-    /// The choice naming the library's density `d`.
-    pub fn from_library(d: Density) -> Self {
-        match d {
-            Density::PiecewiseConstant => Self::PiecewiseConstant,
-            Density::PiecewiseBilinear => Self::PiecewiseBilinear,
+        Sampler::Alias => {
+            "Vose's alias table: O(1) per sample, but breaks stratification and has no inverse"
+        }
+        Sampler::Hierarchical => {
+            "Hierarchical warping down a pyramid of sums: keeps stratification; invertible"
         }
     }
 }
 
-/// `--mapping` and `--input-mapping`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum MappingArg {
-    /// Latitude-longitude: θ = π v, φ = 2π u.
-    Equirectangular,
-    /// The equal-area octahedral square (PBRT-v4's): constant Jacobian 4π, no pole
-    /// singularity.
-    EqualArea,
-}
-
-impl MappingArg {
-    /// The library's mapping.
-    pub fn to_library(self) -> Mapping {
-        match self {
-            Self::Equirectangular => Mapping::Equirectangular,
-            Self::EqualArea => Mapping::EqualArea,
+/// `--density`'s values, as `--help` explains them.
+fn density_help(density: Density) -> &'static str {
+    match density {
+        Density::PiecewiseConstant => {
+            "Constant over each texel (in image space), ∝ filtered luminance × the mapping's \
+             area factor"
+        }
+        Density::PiecewiseBilinear => {
+            "Bilinear between texel centres, ∝ the bilinear radiance reconstruction's \
+             luminance × the area factor (sampled by inversion only)"
         }
     }
 }
 
-/// The name clap shows for a value-enum choice (also what reports print).
-pub fn choice_name<T: ValueEnum>(value: &T) -> String {
-    value
-        .to_possible_value()
-        .map(|v| v.get_name().to_string())
-        .unwrap_or_default()
+/// `--mapping`'s and `--input-mapping`'s values, as `--help` explains them.
+fn mapping_help(mapping: Mapping) -> &'static str {
+    match mapping {
+        Mapping::Equirectangular => "Latitude-longitude: θ = π v, φ = 2π u",
+        Mapping::EqualArea => {
+            "The equal-area octahedral square (PBRT-v4's): constant Jacobian 4π, no pole \
+             singularity"
+        }
+    }
+}
+
+/// The command-line option that sets the [`LightOptions`] field `field`.
+fn flag(field: &str) -> String {
+    match field {
+        "rotation" => "--rotate".into(),
+        "table_width" => "--table-size".into(),
+        _ => format!("--{}", field.replace('_', "-")),
+    }
+}
+
+/// The library's refusal of `options` ([`LightOptions::validate`]) as the command
+/// line says it: the flags with their values. A flag's own parser refuses a bad
+/// scale, rotation, table or square size before this, so those only get the
+/// library's words after the flag.
+fn usage_message(e: &OptionError, options: &LightOptions) -> String {
+    match e {
+        OptionError::BilinearDensitySampler(sampler) => format!(
+            "--density {} with --sampler {sampler} is not supported: the piecewise-bilinear \
+             density is sampled by inversion only (use --sampler {})",
+            options.density,
+            Sampler::Inversion,
+        ),
+        OptionError::EqualAreaInput => format!(
+            "--input-mapping {} with --mapping {} is not supported: an equal-area map \
+             can only be lit with --mapping {}",
+            options.input_mapping,
+            options.mapping,
+            Mapping::EqualArea,
+        ),
+        OptionError::NodeLookupMapping => format!(
+            "--lookup {} with --mapping {} is not supported: the node lookup reads lat-long \
+             maps only (use --lookup {} or --mapping {})",
+            options.lookup,
+            options.mapping,
+            Lookup::Bilinear,
+            Mapping::Equirectangular,
+        ),
+        e => format!("{}: {e}", flag(e.field())),
+    }
 }
 
 fn parse_finite(s: &str) -> Result<f32, String> {
@@ -241,18 +258,18 @@ pub struct Loaded {
 
 impl LightArgs {
     /// The mapping the light uses: `--mapping`, or by default the input's.
-    pub fn mapping(&self) -> MappingArg {
+    pub fn mapping(&self) -> Mapping {
         self.mapping.unwrap_or(self.input_mapping)
     }
 
     /// `--density`, or when not given the library's default for the sampler and
     /// table ([`Density::default_for`]).
-    pub fn density(&self) -> DensityArg {
+    pub fn density(&self) -> Density {
         self.density.unwrap_or_else(|| {
             let table = self
                 .table_size
                 .map(|n| usize::try_from(n).unwrap_or(usize::MAX));
-            DensityArg::from_library(Density::default_for(self.sampler.to_library(), table))
+            Density::default_for(self.sampler, table)
         })
     }
 
@@ -266,15 +283,11 @@ impl LightArgs {
             } else {
                 Rotation::about_z_degrees(self.rotate)
             },
-            lookup: match self.lookup {
-                LookupArg::Nearest => Lookup::Nearest,
-                LookupArg::Bilinear => Lookup::Bilinear,
-                LookupArg::Node => Lookup::Node,
-            },
-            sampler: self.sampler.to_library(),
-            density: self.density().to_library(),
-            mapping: self.mapping().to_library(),
-            input_mapping: self.input_mapping.to_library(),
+            lookup: self.lookup,
+            sampler: self.sampler,
+            density: self.density(),
+            mapping: self.mapping(),
+            input_mapping: self.input_mapping,
             equal_area_size: self
                 .equal_area_size
                 .map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
@@ -290,47 +303,26 @@ impl LightArgs {
     /// that have no effect.
     ///
     /// # Errors
-    /// [`UsageError`] for the piecewise-bilinear density with a sampler other than
-    /// inversion, an equal-area input lit with the equirectangular mapping, and an
-    /// `--equal-area-size` whose square exceeds `--max-texels`.
+    /// [`UsageError`] for options [`LightOptions::validate`] refuses (the
+    /// piecewise-bilinear density with a sampler other than inversion, the node
+    /// lookup with the equal-area mapping, an equal-area input lit with the
+    /// equirectangular mapping), and an `--equal-area-size` whose square exceeds
+    /// `--max-texels`. A `--table-size` that does not fit the map is refused once
+    /// the map is read ([`Self::build`]).
     pub fn check(&self) -> Result<(), UsageError> {
-        let density = self.density();
-        if density == DensityArg::PiecewiseBilinear && self.sampler != SamplerArg::Inversion {
-            return Err(UsageError(format!(
-                "--density {} with --sampler {} is not supported: the piecewise-bilinear \
-                 density is sampled by inversion only (use --sampler {})",
-                choice_name(&density),
-                choice_name(&self.sampler),
-                choice_name(&SamplerArg::Inversion),
-            )));
-        }
-        if self.table_size.is_some() && density != DensityArg::PiecewiseConstant {
-            return Err(UsageError(format!(
-                "--table-size with --density {} is not supported: a reduced sampling table \
-                 needs --density {}",
-                choice_name(&density),
-                choice_name(&DensityArg::PiecewiseConstant),
-            )));
-        }
-        let mapping = self.mapping();
-        if self.input_mapping == MappingArg::EqualArea && mapping == MappingArg::Equirectangular {
-            return Err(UsageError(format!(
-                "--input-mapping {} with --mapping {} is not supported: an equal-area map \
-                 can only be lit with --mapping {}",
-                choice_name(&self.input_mapping),
-                choice_name(&mapping),
-                choice_name(&MappingArg::EqualArea),
-            )));
-        }
+        let options = self.light_options();
+        options
+            .validate()
+            .map_err(|e| UsageError(usage_message(&e, &options)))?;
+        let mapping = options.mapping;
         if let Some(n) = self.equal_area_size {
-            let resampled = self.input_mapping == MappingArg::Equirectangular
-                && mapping == MappingArg::EqualArea;
+            let resampled =
+                self.input_mapping == Mapping::Equirectangular && mapping == Mapping::EqualArea;
             if !resampled {
                 warn(&format!(
                     "--equal-area-size {n} has no effect: only a lat-long map lit with \
                      --mapping equal-area is resampled (here --input-mapping {}, --mapping {})",
-                    choice_name(&self.input_mapping),
-                    choice_name(&mapping)
+                    self.input_mapping, mapping
                 ));
             } else if n.checked_mul(n).is_none_or(|t| t > self.max_texels as u64) {
                 return Err(UsageError(format!(
@@ -395,7 +387,7 @@ impl LightArgs {
         }
         let (w, h) = (image.width(), image.height());
         match self.input_mapping {
-            MappingArg::Equirectangular if w != 2 * h => warn(&format!(
+            Mapping::Equirectangular if w != 2 * h => warn(&format!(
                 "{name}: the map is {w}x{h}, not 2:1; it is read as equirectangular all the \
                  same (φ across the width, θ down the height)"
             )),
@@ -639,34 +631,53 @@ pub fn parse_portal(text: &str) -> Result<envlight::portal::Portal, String> {
 mod tests {
     use super::*;
 
-    /// The command-line choices are exactly the library's variants, under the
-    /// library's names (which reports print).
+    /// The command-line choices are exactly the library's values, under the
+    /// library's names and in its order (which reports print), each explained.
     #[test]
-    fn choices_are_the_library_variants_and_names() {
-        let samplers: Vec<Sampler> = SamplerArg::value_variants()
-            .iter()
-            .map(|v| {
-                assert_eq!(choice_name(v), v.to_library().name());
-                v.to_library()
-            })
-            .collect();
-        assert_eq!(samplers, Sampler::ALL);
-        let densities: Vec<Density> = DensityArg::value_variants()
-            .iter()
-            .map(|v| {
-                assert_eq!(choice_name(v), v.to_library().name());
-                v.to_library()
-            })
-            .collect();
-        assert_eq!(densities, Density::ALL);
-        let mappings: Vec<Mapping> = MappingArg::value_variants()
-            .iter()
-            .map(|v| {
-                assert_eq!(choice_name(v), v.to_library().name());
-                v.to_library()
-            })
-            .collect();
-        assert_eq!(mappings, Mapping::ALL);
+    fn choices_are_the_library_values_and_names() {
+        fn names<T: NamedOption + Send + Sync>(help: fn(T) -> &'static str) {
+            let parser = choices(help);
+            let shown: Vec<String> = parser
+                .possible_values()
+                .expect("choices lists its values")
+                .map(|v| {
+                    assert!(v.get_help().is_some_and(|h| !h.to_string().is_empty()));
+                    v.get_name().to_owned()
+                })
+                .collect();
+            assert_eq!(shown, T::names());
+        }
+        names(sampler_help);
+        names(density_help);
+        names(mapping_help);
+        names(lookup_help);
+    }
+
+    /// Each combination the library refuses is said with the flags and values.
+    #[test]
+    fn refusals_name_the_flags() {
+        let options = LightOptions {
+            lookup: Lookup::Node,
+            mapping: Mapping::EqualArea,
+            ..Default::default()
+        };
+        let m = usage_message(&options.validate().unwrap_err(), &options);
+        assert!(
+            m.starts_with("--lookup node with --mapping equal-area is not supported"),
+            "{m}"
+        );
+        let options = LightOptions {
+            sampler: Sampler::Alias,
+            ..Default::default()
+        };
+        let m = usage_message(&options.validate().unwrap_err(), &options);
+        assert_eq!(
+            m,
+            "--density piecewise-bilinear with --sampler alias is not supported: the \
+             piecewise-bilinear density is sampled by inversion only (use --sampler inversion)"
+        );
+        assert_eq!(flag("table_width"), "--table-size");
+        assert_eq!(flag("equal_area_size"), "--equal-area-size");
     }
 
     #[test]

@@ -9,7 +9,8 @@
 
 use std::sync::{Arc, OnceLock};
 
-use envlight::light::{Density, Mapping, Sampler};
+use envlight::gpu::RadianceFormat;
+use envlight::light::{Density, Mapping, NamedOption, OptionError, Sampler};
 use envlight::load::{load, LoadOptions};
 use envlight::portal::{Portal, PortalLight, PortalOptions};
 use envlight::{
@@ -21,7 +22,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 use rayon::prelude::*;
 
 /// The world frame directions are given and returned in.
@@ -61,73 +62,70 @@ impl Frame {
     }
 }
 
-/// The light's options from the keyword arguments.
-#[allow(clippy::too_many_arguments)]
-fn light_options(
-    sampler: &str,
-    density: Option<&str>,
-    mapping: &str,
-    lookup: &str,
+/// The light's keyword arguments, as `EnvironmentLight()` and `from_array` take
+/// them.
+struct LightKeywords<'a> {
+    sampler: &'a str,
+    density: Option<&'a str>,
+    mapping: Option<&'a str>,
+    input_mapping: &'a str,
+    lookup: &'a str,
     rotate: f32,
     scale: f32,
     table_width: Option<usize>,
-) -> PyResult<LightOptions> {
-    let sampler = choose("sampler", sampler, &Sampler::ALL, |s| s.name())?;
-    // No density given: the library's default for the sampler and table.
-    let density = match density {
-        Some(density) => choose("density", density, &Density::ALL, |d| d.name())?,
-        None => Density::default_for(sampler, table_width),
-    };
-    let mapping = choose("mapping", mapping, &Mapping::ALL, |m| m.name())?;
-    let lookup = choose(
-        "lookup",
-        lookup,
-        &[Lookup::Bilinear, Lookup::Nearest, Lookup::Node],
-        |l| match l {
-            Lookup::Bilinear => "bilinear",
-            Lookup::Nearest => "nearest",
-            Lookup::Node => "node",
-        },
-    )?;
-    if !rotate.is_finite() {
-        return Err(PyValueError::new_err(format!(
-            "rotate must be finite, not {rotate}"
-        )));
-    }
-    if !(scale.is_finite() && scale >= 0.0) {
-        return Err(PyValueError::new_err(format!(
-            "scale must be finite and non-negative, not {scale}"
-        )));
-    }
-    Ok(LightOptions {
-        sampler,
-        density,
-        mapping,
-        lookup,
-        rotation: Rotation::about_z_degrees(rotate),
-        scale,
-        table_width,
-        ..Default::default()
-    })
+    equal_area_size: Option<usize>,
+    mis_compensation: bool,
 }
 
-/// The option among `all` whose `name` is `value`, or a `ValueError` listing them.
-fn choose<T: Copy>(
-    what: &str,
-    value: &str,
-    all: &[T],
-    name: impl Fn(T) -> &'static str,
-) -> PyResult<T> {
-    all.iter()
-        .copied()
-        .find(|&t| name(t) == value)
-        .ok_or_else(|| {
-            let names: Vec<&str> = all.iter().map(|&t| name(t)).collect();
-            PyValueError::new_err(format!(
-                "{what} must be one of {}, not {value:?}",
-                names.join(", ")
-            ))
-        })
+impl LightKeywords<'_> {
+    /// The light's options, checked by the library ([`LightOptions::validate`]);
+    /// `ValueError` naming the keyword for an unknown name or a refused option.
+    fn options(&self) -> PyResult<LightOptions> {
+        let sampler = choose::<Sampler>("sampler", self.sampler)?;
+        // No density given: the library's default for the sampler and table.
+        let density = match self.density {
+            Some(density) => choose::<Density>("density", density)?,
+            None => Density::default_for(sampler, self.table_width),
+        };
+        let input_mapping = choose::<Mapping>("input_mapping", self.input_mapping)?;
+        // No mapping given: the input's own, so an equal-area square is lit as one.
+        let mapping = match self.mapping {
+            Some(mapping) => choose::<Mapping>("mapping", mapping)?,
+            None => input_mapping,
+        };
+        let options = LightOptions {
+            sampler,
+            density,
+            mapping,
+            input_mapping,
+            lookup: choose("lookup", self.lookup)?,
+            rotation: Rotation::about_z_degrees(self.rotate),
+            scale: self.scale,
+            table_width: self.table_width,
+            equal_area_size: self.equal_area_size,
+            mis_compensation: self.mis_compensation,
+        };
+        options.validate().map_err(|e| option_error(&e))?;
+        Ok(options)
+    }
+}
+
+/// The `ValueError` for options the library refuses, naming the keyword.
+fn option_error(e: &OptionError) -> PyErr {
+    let keyword = match e.field() {
+        "rotation" => "rotate",
+        field => field,
+    };
+    PyValueError::new_err(format!("{keyword}: {e}"))
+}
+
+/// The value of the option `T` named `value`, or a `ValueError` naming the
+/// keyword and listing the accepted names.
+fn choose<T: NamedOption>(keyword: &'static str, value: &str) -> PyResult<T> {
+    T::from_name(value).map_err(|mut e| {
+        e.option = keyword;
+        PyValueError::new_err(e.to_string())
+    })
 }
 
 /// The Python exception for a library error.
@@ -522,29 +520,36 @@ fn as_triples_mut(values: &mut [f32]) -> &mut [[f32; 3]] {
 #[pymethods]
 impl PyEnvironmentLight {
     #[new]
-    #[pyo3(signature = (path, *, sampler="inversion", density=None, mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
+    #[pyo3(signature = (path, *, sampler="inversion", density=None, mapping=None, input_mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None, equal_area_size=None, mis_compensation=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         path: std::path::PathBuf,
         sampler: &str,
         density: Option<&str>,
-        mapping: &str,
+        mapping: Option<&str>,
+        input_mapping: &str,
         lookup: &str,
         rotate: f32,
         scale: f32,
         frame: &str,
         table_width: Option<usize>,
+        equal_area_size: Option<usize>,
+        mis_compensation: bool,
     ) -> PyResult<Self> {
-        let options = light_options(
+        let options = LightKeywords {
             sampler,
             density,
             mapping,
+            input_mapping,
             lookup,
             rotate,
             scale,
             table_width,
-        )?;
+            equal_area_size,
+            mis_compensation,
+        }
+        .options()?;
         let frame = Frame::parse(frame)?;
         let image = py
             .detach(|| load(&path, &LoadOptions::default()))
@@ -556,19 +561,22 @@ impl PyEnvironmentLight {
     /// A light from an `(H, W, 3)` float32 array of linear RGB radiance, row 0 at
     /// the top (θ = 0), column 0 at φ = 0.
     #[staticmethod]
-    #[pyo3(signature = (rgb, *, sampler="inversion", density=None, mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None))]
+    #[pyo3(signature = (rgb, *, sampler="inversion", density=None, mapping=None, input_mapping="equirectangular", lookup="bilinear", rotate=0.0, scale=1.0, frame="z-up", table_width=None, equal_area_size=None, mis_compensation=false))]
     #[allow(clippy::too_many_arguments)]
     fn from_array(
         py: Python<'_>,
         rgb: &Bound<'_, PyAny>,
         sampler: &str,
         density: Option<&str>,
-        mapping: &str,
+        mapping: Option<&str>,
+        input_mapping: &str,
         lookup: &str,
         rotate: f32,
         scale: f32,
         frame: &str,
         table_width: Option<usize>,
+        equal_area_size: Option<usize>,
+        mis_compensation: bool,
     ) -> PyResult<Self> {
         let rgb: PyReadonlyArray3<'_, f32> = rgb.extract().map_err(|_| {
             PyTypeError::new_err("rgb must be a numpy float32 array of shape (H, W, 3)")
@@ -580,15 +588,19 @@ impl PyEnvironmentLight {
             )));
         }
         let (h, w) = (shape[0], shape[1]);
-        let options = light_options(
+        let options = LightKeywords {
             sampler,
             density,
             mapping,
+            input_mapping,
             lookup,
             rotate,
             scale,
             table_width,
-        )?;
+            equal_area_size,
+            mis_compensation,
+        }
+        .options()?;
         let frame = Frame::parse(frame)?;
         // One copy into the image's texels (and one check of them, in
         // `EnvImage::new`), without the interpreter lock when the array is
@@ -868,16 +880,8 @@ impl PyEnvironmentLight {
     /// an unknown `radiance`, or `"f16"` with a texel above 65504.
     #[pyo3(signature = (radiance="f32"))]
     fn gpu_tables<'py>(&self, py: Python<'py>, radiance: &str) -> PyResult<Bound<'py, PyDict>> {
-        use envlight::gpu::{param, section, GpuTableOptions, RadianceFormat};
-        let format = match radiance {
-            "f32" => RadianceFormat::F32,
-            "f16" => RadianceFormat::F16,
-            _ => {
-                return Err(PyValueError::new_err(format!(
-                    "radiance must be \"f32\" or \"f16\", not {radiance:?}"
-                )))
-            }
-        };
+        use envlight::gpu::{param, section, GpuTableOptions};
+        let format = choose::<RadianceFormat>("radiance", radiance)?;
         let tables = py
             .detach(|| self.light.gpu_tables(&GpuTableOptions { radiance: format }))
             .map_err(to_py_err)?;
@@ -1160,5 +1164,13 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyEnvironmentLight>()?;
     m.add_function(wrap_pyfunction!(release_buffers, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The accepted names of each option, in the library's order, so that Python
+    // code (the Mitsuba emitter) lists them without a copy of its own.
+    let names = |names: Vec<&'static str>| PyTuple::new(m.py(), names);
+    m.add("SAMPLERS", names(Sampler::names())?)?;
+    m.add("DENSITIES", names(Density::names())?)?;
+    m.add("MAPPINGS", names(Mapping::names())?)?;
+    m.add("LOOKUPS", names(Lookup::names())?)?;
+    m.add("RADIANCE_FORMATS", names(RadianceFormat::names())?)?;
     Ok(())
 }

@@ -88,6 +88,10 @@ pub enum Error {
     /// An option given to a builder is out of range (a NaN scale, say).
     #[error("invalid option: {0}")]
     InvalidOption(String),
+    /// Light options that no light can be built with, whatever the image
+    /// ([`crate::light::LightOptions::validate`]); the error names the field.
+    #[error("invalid option: {0}")]
+    LightOption(crate::light::OptionError),
     /// A combination of options that a feature does not implement (the hierarchical
     /// sampler exported for a GPU, say).
     #[error("not supported: {0}")]
@@ -114,6 +118,14 @@ pub enum Error {
         /// The offending value.
         value: f32,
     },
+}
+
+// By hand rather than `#[from]`, which would also make the option error the
+// source: a front end printing the chain would then print its message twice.
+impl From<crate::light::OptionError> for Error {
+    fn from(e: crate::light::OptionError) -> Self {
+        Error::LightOption(e)
+    }
 }
 
 /// Shorthand for results in this crate.

@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use clap::ValueEnum;
 use envlight::gpu::{GpuTableOptions, RadianceFormat};
+use envlight::light::Sampler;
 
 use super::{Outcome, UsageError};
-use crate::light_args::{choice_name, LightArgs, SamplerArg};
+use crate::light_args::{choices, LightArgs};
 use crate::output::{write_bytes, Output};
 
 /// Arguments of `envlight export`.
@@ -34,38 +34,37 @@ pub struct Args {
     output: PathBuf,
 
     /// How the radiance image is stored.
-    #[arg(long, value_name = "FORMAT", value_enum, default_value_t = RadianceArg::F32)]
-    radiance: RadianceArg,
+    #[arg(long, value_name = "FORMAT", default_value_t = RadianceFormat::F32,
+          value_parser = choices(radiance_help))]
+    radiance: RadianceFormat,
 }
 
-/// `--radiance`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum RadianceArg {
-    /// RGB 32-bit floats, 12 bytes per texel: the map's values exactly.
-    F32,
-    /// RGBA 16-bit floats (alpha 0), 8 bytes per texel; values above 65504 refused.
-    F16,
+/// `--radiance`'s values, as `--help` explains them.
+fn radiance_help(format: RadianceFormat) -> &'static str {
+    match format {
+        RadianceFormat::F32 => "RGB 32-bit floats, 12 bytes per texel: the map's values exactly",
+        RadianceFormat::F16 => {
+            "RGBA 16-bit floats (alpha 0), 8 bytes per texel; values above 65504 refused"
+        }
+    }
 }
 
 /// Runs `envlight export`.
 pub fn run(args: &Args) -> anyhow::Result<Outcome> {
     // Refused before the map is read: it is the option, not the map, that is wrong.
-    if args.light.sampler == SamplerArg::Hierarchical {
+    if args.light.sampler == Sampler::Hierarchical {
         return Err(UsageError(format!(
             "--sampler {} is not supported by export: the hierarchical sampler is not \
              ported to the GPU; use --sampler {} or {}",
-            choice_name(&SamplerArg::Hierarchical),
-            choice_name(&SamplerArg::Inversion),
-            choice_name(&SamplerArg::Alias),
+            Sampler::Hierarchical,
+            Sampler::Inversion,
+            Sampler::Alias,
         ))
         .into());
     }
     let loaded = args.light.load()?;
     let options = GpuTableOptions {
-        radiance: match args.radiance {
-            RadianceArg::F32 => RadianceFormat::F32,
-            RadianceArg::F16 => RadianceFormat::F16,
-        },
+        radiance: args.radiance,
     };
     let tables = loaded.light.gpu_tables(&options).map_err(|e| match e {
         envlight::Error::Unsupported(_) => anyhow::Error::new(UsageError(e.to_string())),

@@ -15,7 +15,7 @@ use serde_json::json;
 
 use super::Outcome;
 use crate::device::DeviceArgs;
-use crate::light_args::{choice_name, LightArgs};
+use crate::light_args::LightArgs;
 use crate::output::Output;
 use crate::shading::{product_sampler, NormalArgs};
 
@@ -95,7 +95,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             "width": width,
             "height": height,
             "format": loaded.format,
-            "lookup": choice_name(&args.light.lookup),
+            "lookup": args.light.lookup.name(),
             "sampler": sampler,
             "density": density,
             "mapping": mapping,
@@ -163,7 +163,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
                 format!(
                     "lookup {}, sampler {sampler}, density {density}, mapping {mapping}, \
                      rotate {}°, scale {}",
-                    choice_name(&args.light.lookup),
+                    args.light.lookup.name(),
                     args.light.rotate,
                     args.light.scale
                 ),

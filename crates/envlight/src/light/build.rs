@@ -3,7 +3,7 @@
 //! docs/design.md §4 step 1 and its MIS compensation, the node values of the bilinear
 //! density, the 2D sampler over them, and `∫ L dω`.
 
-use super::{Density, EnvironmentLight, LightOptions, Mapping, Planar, Sampler};
+use super::{Density, EnvironmentLight, LightOptions, Mapping, OptionError, Planar, Sampler};
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
 use crate::color::luminance;
@@ -23,10 +23,12 @@ impl EnvironmentLight {
     /// the default inversion sampler.
     ///
     /// # Errors
-    /// [`Error::InvalidOption`] when `options.scale` is negative or not finite, the
-    /// bilinear density is asked of a sampler other than inversion, an equal-area
-    /// input is not square, an equal-area input is asked for a lat-long light, or
-    /// the node lookup is asked of the equal-area mapping.
+    /// [`Error::LightOption`] when [`LightOptions::validate`] refuses the options
+    /// (a negative or non-finite scale, the bilinear density with a sampler other
+    /// than inversion, the node lookup with the equal-area mapping, an equal-area
+    /// input for a lat-long light, ...); [`Error::InvalidOption`] when an
+    /// equal-area input is not square, or `table_width` does not fit the image
+    /// ([`table_reduction`]).
     pub fn new(image: EnvImage, options: LightOptions) -> Result<Self> {
         Self::with_progress(image, options, &|_| {})
     }
@@ -44,36 +46,16 @@ impl EnvironmentLight {
         options: LightOptions,
         rows_done: &(dyn Fn(usize) + Sync),
     ) -> Result<Self> {
-        if !(options.scale >= 0.0 && options.scale.is_finite()) {
-            return Err(Error::InvalidOption(format!(
-                "radiance scale must be finite and >= 0, got {}",
-                options.scale
-            )));
-        }
-        if options.density == Density::PiecewiseBilinear && options.sampler != Sampler::Inversion {
-            return Err(Error::InvalidOption(format!(
-                "the piecewise-bilinear density (the default) is sampled by inversion only, \
-                 not by the {} sampler: ask for the piecewise-constant density with it",
-                options.sampler.name()
-            )));
-        }
-        // The node lookup is the equirectangular map's (Mitsuba's envmap).
-        if options.lookup == Lookup::Node && options.mapping != Mapping::Equirectangular {
-            return Err(Error::InvalidOption(
-                "the node lookup reads equirectangular maps only, not the equal-area square".into(),
-            ));
-        }
+        // The rules about the options alone; those about the image follow.
+        options.validate()?;
         let image = match (options.input_mapping, options.mapping) {
             (Mapping::Equirectangular, Mapping::Equirectangular) => image,
             (Mapping::Equirectangular, Mapping::EqualArea) => {
+                // Never 0: `validate` refuses a given 0, and the default size of a
+                // non-empty image is at least 1.
                 let size = options
                     .equal_area_size
                     .unwrap_or_else(|| equal_area::default_size(image.width(), image.height()));
-                if size == 0 {
-                    return Err(Error::InvalidOption(
-                        "the equal-area size must be at least 1".into(),
-                    ));
-                }
                 equal_area::resample_equirect(&image, size, options.lookup)
             }
             (Mapping::EqualArea, Mapping::EqualArea) => {
@@ -86,10 +68,9 @@ impl EnvironmentLight {
                 }
                 image
             }
+            // `validate` refused this above; the arm only completes the match.
             (Mapping::EqualArea, Mapping::Equirectangular) => {
-                return Err(Error::InvalidOption(
-                    "an equal-area input can only be lit with the equal-area mapping".into(),
-                ))
+                return Err(OptionError::EqualAreaInput.into())
             }
         };
         let reduction = table_reduction(image.width(), image.height(), &options)?;
@@ -114,8 +95,10 @@ impl EnvironmentLight {
 /// density pools. Front ends call it to refuse a bad width before building.
 ///
 /// # Errors
-/// [`Error::InvalidOption`], naming the widths that would fit.
+/// [`Error::LightOption`] for a width of 0 ([`LightOptions::validate`]'s rule);
+/// [`Error::InvalidOption`] for one that does not fit, naming the widths that would.
 pub fn table_reduction(w: usize, h: usize, options: &LightOptions) -> Result<usize> {
+    options.validate_table_width()?;
     let Some(table) = options.table_width else {
         return Ok(1);
     };
@@ -124,9 +107,6 @@ pub fn table_reduction(w: usize, h: usize, options: &LightOptions) -> Result<usi
             "sampling table width {table}: {why}"
         )))
     };
-    if table == 0 {
-        return bad("must be at least 1".into());
-    }
     if table > w {
         return bad(format!("wider than the light's image ({w} texels)"));
     }

@@ -21,8 +21,9 @@
 //! (equirectangular) or `4π` (equal-area).
 //!
 //! The light itself, its options and its single queries live here; the
-//! submodules hold its construction (`build`), its batch queries (`batch`) and
-//! the efficiency quadrature (`efficiency`).
+//! submodules hold its construction (`build`), its batch queries (`batch`), the
+//! efficiency quadrature (`efficiency`), and the options' names and validation
+//! (`options`).
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
@@ -31,6 +32,8 @@ mod build;
 pub(crate) use build::bilinear_nodes;
 pub use build::table_reduction;
 mod efficiency;
+mod options;
+pub use options::{NamedOption, OptionError, UnknownName};
 
 use crate::alias::AliasTable2D;
 use crate::bilinear::BilinearDistribution2D;
