@@ -6,7 +6,9 @@
 // spends its time past the keys. The light and patch grid are those the seeds
 // were made with (crates/envlight/examples/fuzz_seeds.rs, `visibility_seeds`).
 use envlight::visibility::light_hash;
-use envlight::{EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3, VisibilityCache};
+use envlight::{
+    EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3, VisibilityCache,
+};
 use std::sync::{Arc, OnceLock};
 
 fn product() -> &'static Arc<ProductSampler> {
@@ -30,7 +32,10 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     bytes.extend_from_slice(&0u32.to_le_bytes());
     bytes.extend_from_slice(data);
     if let Ok(cache) = VisibilityCache::from_bytes(&bytes, "fuzz", product.clone(), "") {
-        assert!(cache.to_bytes("").expect("an empty key") == bytes, "a round trip changed the file");
+        assert!(
+            cache.to_bytes("").expect("an empty key") == bytes,
+            "a round trip changed the file"
+        );
         let up = Vec3::new(0.0, 0.0, 1.0);
         for (i, &key) in [0.0f32, 0.25, 0.5, 1.0].iter().enumerate() {
             let point = cache.at(Vec3::new(key, -key, 0.0), &Factor::cosine(up));

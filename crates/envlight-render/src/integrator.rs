@@ -178,7 +178,10 @@ impl<'a> Integrator<'a> {
         height: usize,
         options: &VisibilityOptions,
     ) -> Option<VisibilitySummary> {
-        let product = self.product.as_ref().filter(|_| self.strategy.uses_visibility())?;
+        let product = self
+            .product
+            .as_ref()
+            .filter(|_| self.strategy.uses_visibility())?;
         let scene = self.scene;
         let hits: Vec<(Vec3, Vec3)> = (0..width * height)
             .into_par_iter()
@@ -293,15 +296,14 @@ impl<'a> Integrator<'a> {
                 .as_ref()
                 .and_then(|c| c.sample(xi))
                 .map(|s| (s.direction, s.pdf, s.radiance)),
-            Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility => match (
-                point,
-                &self.compensated,
-            ) {
-                (Some(p), _) => p.sample(xi),
-                (None, Some(c)) => c.sample(xi),
-                (None, None) => self.light.sample(xi),
+            Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility => {
+                match (point, &self.compensated) {
+                    (Some(p), _) => p.sample(xi),
+                    (None, Some(c)) => c.sample(xi),
+                    (None, None) => self.light.sample(xi),
+                }
+                .map(|s| (s.direction, s.pdf, s.radiance))
             }
-            .map(|s| (s.direction, s.pdf, s.radiance)),
             Strategy::Portal | Strategy::MisPortal => match portal {
                 Some(p) => p.sample(xi),
                 None => self.light.sample(xi),

@@ -414,8 +414,8 @@ impl Scene {
         let wood = Material::Uniform(Bsdf::Diffuse {
             albedo: [0.45, 0.35, 0.25],
         });
-        let rect = |name: &'static str, corner: [f32; 3], u: [f32; 3], v: [f32; 3], material| {
-            Object {
+        let rect =
+            |name: &'static str, corner: [f32; 3], u: [f32; 3], v: [f32; 3], material| Object {
                 name,
                 shape: Shape::Rect {
                     corner: Vec3::from(corner),
@@ -423,17 +423,28 @@ impl Scene {
                     v: Vec3::from(v),
                 },
                 material,
-            }
-        };
+            };
         let mut objects = Vec::new();
         let slats = (2.0 * HALF / PITCH) as usize;
         for k in 0..=slats {
             let at = -HALF + k as f32 * PITCH - SLAT / 2.0;
             // Lower layer along y, upper layer along x: a lattice of square gaps.
             let along_y = [at, -HALF, 2.4];
-            objects.push(rect("roof", along_y, [SLAT, 0.0, 0.0], [0.0, 2.0 * HALF, 0.0], wood));
+            objects.push(rect(
+                "roof",
+                along_y,
+                [SLAT, 0.0, 0.0],
+                [0.0, 2.0 * HALF, 0.0],
+                wood,
+            ));
             let along_x = [-HALF, at, 2.45];
-            objects.push(rect("roof", along_x, [2.0 * HALF, 0.0, 0.0], [0.0, SLAT, 0.0], wood));
+            objects.push(rect(
+                "roof",
+                along_x,
+                [2.0 * HALF, 0.0, 0.0],
+                [0.0, SLAT, 0.0],
+                wood,
+            ));
         }
         objects.push(rect(
             "wall",

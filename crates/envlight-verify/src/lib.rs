@@ -89,12 +89,12 @@ pub use portal::{
     Quad, PORTAL_EDGE_BAND,
 };
 pub use product::{product_normals, AtShadingPoint};
-pub use visibility::{AtVisibilityPoint, VisibilityVariant};
 pub use quadrature::{gauss_legendre, Needs, Point, Quadrature, FOLD_SPLIT, SPLIT, SPLIT_ANGLE};
 pub use report::{format_table, Row, Verdict};
 pub use sampler::{Grid, SphereSample, SphereSampler};
 pub use stats::{fits, over_points, over_sample_chunks, over_samples, Moments};
 pub use suite::{assert_black, assert_invariants, run, Config, Lobes, Report, CHECKS};
+pub use visibility::{AtVisibilityPoint, VisibilityVariant};
 
 /// Significance level of every chi-square test: a correct sampler is rejected with
 /// probability 1e-3 per case (but seeds are fixed, so a passing case stays passing).

@@ -293,7 +293,8 @@ fn a_saved_cache_loads_and_samples_the_same() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("room.envlvis");
     cache.save(&path, "room v1").unwrap();
-    let loaded = VisibilityCache::load(&path, Arc::new(cache.product().clone()), "room v1").unwrap();
+    let loaded =
+        VisibilityCache::load(&path, Arc::new(cache.product().clone()), "room v1").unwrap();
     assert_eq!(loaded.summary(), cache.summary());
     let factor = Factor::cosine(UP);
     for position in [FLOOR, Vec3::new(-0.7, 0.6, 0.0)] {
@@ -301,7 +302,10 @@ fn a_saved_cache_loads_and_samples_the_same() {
         for k in 0..2000 {
             let xi = envlight::rng::xi_2d(5, k);
             let (sa, sb) = (a.sample(xi).unwrap(), b.sample(xi).unwrap());
-            assert_eq!((sa.direction, sa.pdf.to_bits()), (sb.direction, sb.pdf.to_bits()));
+            assert_eq!(
+                (sa.direction, sa.pdf.to_bits()),
+                (sb.direction, sb.pdf.to_bits())
+            );
         }
     }
     assert_eq!(
@@ -319,7 +323,10 @@ fn a_cache_for_another_scene_or_light_is_refused() {
     let e = VisibilityCache::from_bytes(&bytes, "room.envlvis", product, "room v2").unwrap_err();
     let message = e.to_string();
     assert!(matches!(e, envlight::Error::Mismatch { .. }), "{message}");
-    assert!(message.contains("\"room v1\"") && message.contains("\"room v2\""), "{message}");
+    assert!(
+        message.contains("\"room v1\"") && message.contains("\"room v2\""),
+        "{message}"
+    );
     let rotated = EnvironmentLight::new(
         envlight::builtin::sky(128, 64),
         LightOptions {
@@ -328,7 +335,10 @@ fn a_cache_for_another_scene_or_light_is_refused() {
         },
     )
     .unwrap();
-    let other = Arc::new(ProductSampler::new(Arc::new(rotated), ProductOptions::default()));
+    let other = Arc::new(ProductSampler::new(
+        Arc::new(rotated),
+        ProductOptions::default(),
+    ));
     let e = VisibilityCache::from_bytes(&bytes, "room.envlvis", other, "room v1").unwrap_err();
     assert!(matches!(e, envlight::Error::Mismatch { .. }), "{e}");
 }
@@ -338,18 +348,15 @@ fn a_damaged_cache_file_is_an_error_never_a_panic() {
     // Every truncation, and single-byte changes all over the file: a decode
     // error (or, for a change that leaves a valid cache, a cache), never a panic.
     let (points, normals) = room_points();
-    let product = Arc::new(
-        ProductSampler::new(
-            Arc::new(
-                EnvironmentLight::new(envlight::builtin::sky(32, 16), LightOptions::default())
-                    .unwrap(),
-            ),
-            ProductOptions {
-                patches: Some([8, 4]),
-                ..Default::default()
-            },
+    let product = Arc::new(ProductSampler::new(
+        Arc::new(
+            EnvironmentLight::new(envlight::builtin::sky(32, 16), LightOptions::default()).unwrap(),
         ),
-    );
+        ProductOptions {
+            patches: Some([8, 4]),
+            ..Default::default()
+        },
+    ));
     let options = VisibilityOptions {
         target_entries: 8,
         ..Default::default()
@@ -365,7 +372,10 @@ fn a_damaged_cache_file_is_an_error_never_a_panic() {
     let bytes = cache.to_bytes("k").unwrap();
     for n in 0..bytes.len() {
         let e = VisibilityCache::from_bytes(&bytes[..n], "cut", product.clone(), "k").unwrap_err();
-        assert!(matches!(e, envlight::Error::Decode { .. }), "cut at {n}: {e}");
+        assert!(
+            matches!(e, envlight::Error::Decode { .. }),
+            "cut at {n}: {e}"
+        );
     }
     let mut rng = envlight::rng::SplitMix64::new(9);
     for _ in 0..5000 {
@@ -380,7 +390,10 @@ fn a_damaged_cache_file_is_an_error_never_a_panic() {
                 }
             }
             Err(e) => assert!(
-                matches!(e, envlight::Error::Decode { .. } | envlight::Error::Mismatch { .. }),
+                matches!(
+                    e,
+                    envlight::Error::Decode { .. } | envlight::Error::Mismatch { .. }
+                ),
                 "{e}"
             ),
         }

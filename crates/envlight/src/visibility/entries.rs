@@ -2,8 +2,8 @@
 //! cell of an octahedral grid of normals, found again by a hash of the two.
 
 use super::{VisibilityError, VisibilityOptions};
-use crate::math::Vec3;
 use crate::mapping::octahedral::sphere_to_octahedral;
+use crate::math::Vec3;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
@@ -82,7 +82,11 @@ impl Grid {
         let mut grid = Self::new(radius, bins);
         for (e, &key) in keys.iter().enumerate() {
             if (key & 0xff) as usize >= bins * bins {
-                return Err(format!("entry {e}: normal bin {} of {}", key & 0xff, bins * bins));
+                return Err(format!(
+                    "entry {e}: normal bin {} of {}",
+                    key & 0xff,
+                    bins * bins
+                ));
             }
             if grid.map.insert(key, e as u32).is_some() {
                 return Err(format!("entry {e}: the key of an earlier entry"));

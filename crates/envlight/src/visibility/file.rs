@@ -106,7 +106,12 @@ impl VisibilityCache {
         w.extend_from_slice(&(self.entries.len() as u32).to_le_bytes());
         for (key, entry) in self.grid.keys().iter().zip(&self.entries) {
             w.extend_from_slice(&key.to_le_bytes());
-            for x in [entry.normal.x, entry.normal.y, entry.normal.z, entry.cos_spread] {
+            for x in [
+                entry.normal.x,
+                entry.normal.y,
+                entry.normal.z,
+                entry.cos_spread,
+            ] {
                 w.extend_from_slice(&x.to_le_bytes());
             }
             for v in &entry.visibility {
@@ -154,7 +159,9 @@ impl VisibilityCache {
         let saved_hash = r.u64()?;
         let key_len = r.u32()? as usize;
         if key_len > MAX_SCENE_KEY {
-            return Err(r.bad(format!("scene key of {key_len} bytes (at most {MAX_SCENE_KEY})")));
+            return Err(r.bad(format!(
+                "scene key of {key_len} bytes (at most {MAX_SCENE_KEY})"
+            )));
         }
         let saved_key = std::str::from_utf8(r.take(key_len)?)
             .map_err(|_| r.bad("the scene key is not UTF-8".into()))?
@@ -219,11 +226,13 @@ impl VisibilityCache {
                 )));
             }
             let bound = cosine_bounds(&view, normal, cos_spread);
-            entries.push(entry(normal, cos_spread, &bound, visibility, &view, &options));
+            entries.push(entry(
+                normal, cos_spread, &bound, visibility, &view, &options,
+            ));
             keys.push(key);
         }
-        let grid = Grid::from_keys(radius, options.normal_bins, &keys)
-            .map_err(|detail| r.bad(detail))?;
+        let grid =
+            Grid::from_keys(radius, options.normal_bins, &keys).map_err(|detail| r.bad(detail))?;
         Ok(Self {
             product,
             grid,

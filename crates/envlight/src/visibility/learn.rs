@@ -140,11 +140,7 @@ impl Batch {
 }
 
 /// The entry of `p`, its estimates `V̂ = (Σ t + a) / (m + a)`.
-fn finish(
-    p: Pending,
-    patches: &Patches<'_>,
-    options: &VisibilityOptions,
-) -> Entry {
+fn finish(p: Pending, patches: &Patches<'_>, options: &VisibilityOptions) -> Entry {
     let a = options.prior;
     let visibility = p
         .sum
@@ -152,7 +148,14 @@ fn finish(
         .zip(&p.count)
         .map(|(&s, &m)| (s + a) / (m as f32 + a))
         .collect();
-    entry(p.normal, p.cos_spread, &p.bound, visibility, patches, options)
+    entry(
+        p.normal,
+        p.cos_spread,
+        &p.bound,
+        visibility,
+        patches,
+        options,
+    )
 }
 
 /// The entry with normal `normal`, spread `cos_spread`, cosine bounds `bound`

@@ -95,7 +95,7 @@ impl Default for VisibilityOptions {
             rays_per_patch: 4,
             learned_share: 0.9,
             prior: 0.1,
-            seed: 0x5eed_0f_5c7,
+            seed: 0x5eed_5c7e,
         }
     }
 }
