@@ -11,6 +11,10 @@ the map's luminance, and answers in batches over numpy arrays (float32):
   sampling at shading points, in proportion to radiance × max(0, n·ω);
 - ``verify()``: the invariant checks, as ``envlight verify`` prints them.
 
+``VisibilityCache(light, points, normals, trace)`` learns, through ``trace``, your
+ray tracer, where each region of a scene sees the sky, and samples radiance ×
+max(0, n·ω) there with an exact pdf (``sample``, ``pdf``, ``save``, ``load``).
+
 Large batch outputs (256 KiB and up) live in buffers that go back to a small
 cache when their arrays are freed, so that the next batch call does not pay for
 fresh pages (at most 8 buffers, 512 MiB); ``release_buffers()`` empties it.
@@ -44,6 +48,7 @@ from ._native import (
     RADIANCE_FORMATS,
     SAMPLERS,
     EnvironmentLight,
+    VisibilityCache,
     __version__,
     release_buffers,
 )
@@ -55,6 +60,7 @@ __all__ = [
     "MAPPINGS",
     "RADIANCE_FORMATS",
     "SAMPLERS",
+    "VisibilityCache",
     "__version__",
     "release_buffers",
 ]

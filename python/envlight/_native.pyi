@@ -217,3 +217,45 @@ class EnvironmentLight:
     def sampling_bytes(self) -> int: ...
     @property
     def frame(self) -> _Frame: ...
+
+class VisibilityCache:
+    """Sampling of radiance × max(0, n·ω) in proportion to what each region of a
+    scene sees of the sky, learned through the caller's ray tracer, with an exact
+    pdf that is positive wherever the unoccluded integrand is (the design notes, §10).
+
+    ``trace(origins, directions)`` receives ``(M, 3)`` float32 arrays in the
+    light's frame (rays start exactly at the given points: offset them as your
+    shadow rays need) and returns an ``(M,)`` float32 array of transmittance in
+    [0, 1] (1: the ray escapes). Its exceptions reach the caller unchanged; a wrong
+    shape, NaN or a value outside [0, 1] is a ``ValueError``.
+    """
+
+    def __init__(
+        self,
+        light: EnvironmentLight,
+        points: _F32,
+        normals: _F32,
+        trace: Any,
+        *,
+        radius: Optional[float] = None,
+        normal_bins: Optional[int] = None,
+        target_entries: Optional[int] = None,
+        memory_budget: Optional[int] = None,
+        rays_per_patch: Optional[int] = None,
+        learned_share: Optional[float] = None,
+        prior: Optional[float] = None,
+        seed: Optional[int] = None,
+    ) -> None: ...
+    def sample(self, points: _F32, normals: _F32, u: _F32) -> Tuple[_F32, _F32, _F32]:
+        """``(directions (N, 3), pdf (N,), radiance (N, 3))`` at each shading point."""
+    def pdf(self, points: _F32, normals: _F32, directions: _F32) -> _F32:
+        """The density (per steradian) of ``sample`` for each point and direction."""
+    def save(self, path: Union[str, PathLike[str]], scene_key: str) -> None:
+        """Writes the cache with the key of the scene it was learned in."""
+    @staticmethod
+    def load(
+        path: Union[str, PathLike[str]], light: EnvironmentLight, scene_key: str
+    ) -> "VisibilityCache":
+        """Reads a saved cache; ``ValueError`` naming both keys for another light or scene."""
+    def summary(self) -> Dict[str, Any]:
+        """``entries``, ``bytes``, ``radius``, ``mean_visibility``, ``rays``."""

@@ -9,6 +9,8 @@
 
 use std::sync::{Arc, OnceLock};
 
+mod visibility;
+
 use envlight::gpu::RadianceFormat;
 use envlight::light::{Density, Mapping, NamedOption, OptionError, Sampler};
 use envlight::load::{load, LoadOptions};
@@ -312,7 +314,7 @@ type Samples<'py> = (
 struct PyEnvironmentLight {
     light: Arc<envlight::EnvironmentLight>,
     frame: Frame,
-    product: OnceLock<ProductSampler>,
+    product: OnceLock<Arc<ProductSampler>>,
     /// The sun and the residual, found on first use (`sun`, `sun_residual`).
     sun: OnceLock<envlight::SunExtraction>,
     /// The portal light of the last portals given to `sample_portal`/`pdf_portal`
@@ -441,9 +443,13 @@ impl PyEnvironmentLight {
         }
     }
 
-    fn product(&self) -> &ProductSampler {
-        self.product
-            .get_or_init(|| ProductSampler::new(self.light.clone(), ProductOptions::default()))
+    fn product(&self) -> &Arc<ProductSampler> {
+        self.product.get_or_init(|| {
+            Arc::new(ProductSampler::new(
+                self.light.clone(),
+                ProductOptions::default(),
+            ))
+        })
     }
 
     /// Draws the samples `0..n` with `draw` (given a range of sample indices and
@@ -1162,6 +1168,7 @@ impl PyEnvironmentLight {
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyEnvironmentLight>()?;
+    m.add_class::<visibility::PyVisibilityCache>()?;
     m.add_function(wrap_pyfunction!(release_buffers, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The accepted names of each option, in the library's order, so that Python

@@ -104,7 +104,7 @@ impl<'a> Integrator<'a> {
     /// An integrator for `scene` under `light`. `max_depth` is the largest number of
     /// surface interactions on a path (1 = direct lighting only; 0 renders only what
     /// camera rays see directly: the environment, black objects). Builds the
-    /// compensated distribution (`mis-compensated`, and `mis-product` for metals),
+    /// compensated distribution (`mis-compensated`, and `mis-product` and `mis-visibility` for metals),
     /// the product sampler (over a copy of `light`,
     /// `O(w h)`), or the portal light over the scene's portals (a copy of `light`
     /// and `12 n²` bytes of tables per portal side seen, see [`envlight::portal`]), when
@@ -129,7 +129,7 @@ impl<'a> Integrator<'a> {
     ) -> Self {
         let options = product;
         // `mis-product` samples metals from the compensated light too.
-        let compensated = matches!(strategy, Strategy::MisCompensated | Strategy::MisProduct)
+        let compensated = (strategy == Strategy::MisCompensated || strategy.mixes_product())
             .then(|| CompensatedLight::new(light));
         let product = strategy
             .uses_product()
@@ -260,7 +260,7 @@ impl<'a> Integrator<'a> {
                 None => self.light.pdf(d),
             },
             (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
-            (None, Strategy::Product | Strategy::MisProduct) => match point {
+            (None, Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility) => match point {
                 Some(p) => p.pdf(d),
                 None => self.light.pdf(d),
             },

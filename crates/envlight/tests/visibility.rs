@@ -399,3 +399,47 @@ fn a_damaged_cache_file_is_an_error_never_a_panic() {
         }
     }
 }
+
+#[test]
+fn a_rotated_small_map_in_the_room_passes_the_harness() {
+    // One patch per cell of a 64 × 32 map turned 30° about z: the cache's
+    // patches, bounds and directions all go through the light's rotation.
+    let image = envlight::EnvImage::from_fn(64, 32, |x, y| {
+        let (u, v) = ((x as f32 + 0.5) / 64.0, (y as f32 + 0.5) / 32.0);
+        if (0.55..0.62).contains(&u) && (0.3..0.4).contains(&v) {
+            [20.0, 18.0, 14.0]
+        } else if v < 0.5 {
+            [0.5, 0.6, 0.9]
+        } else {
+            [0.2, 0.18, 0.15]
+        }
+    })
+    .unwrap();
+    let options = LightOptions {
+        rotation: envlight::Rotation::about_z_degrees(30.0),
+        ..Default::default()
+    };
+    let light = EnvironmentLight::new(image, options).unwrap();
+    let product = Arc::new(ProductSampler::new(
+        Arc::new(light),
+        ProductOptions::default(),
+    ));
+    let (points, normals) = room_points();
+    let cache = VisibilityCache::build(
+        product,
+        &points,
+        &normals,
+        &VisibilityOptions::default(),
+        Room { roof: true }.trace(),
+    )
+    .unwrap();
+    for (case, position, normal) in [("floor", FLOOR, UP), ("wall", WALL, EAST)] {
+        let s = AtVisibilityPoint::new(
+            &cache,
+            position,
+            Factor::cosine(normal),
+            VisibilityVariant::Exact,
+        );
+        verify::assert_invariants(case, &s, &s.integrand(), &Config::SYNTHETIC);
+    }
+}

@@ -1,7 +1,7 @@
 //! Saving and loading a [`VisibilityCache`]: what it learned, and the keys that
 //! say what it was learned for.
 //!
-//! Layout (little-endian; docs/visibility.md has the table):
+//! Layout (little-endian):
 //!
 //! ```text
 //! magic "envlvis\0" | version u32 = 1 | light hash u64 | scene key: u32 length, UTF-8
