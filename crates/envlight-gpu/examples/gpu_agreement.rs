@@ -3,9 +3,9 @@
 //! gpu_agreement [MAP] [ROWS]` (default builtin sky, 65536 rows). With
 //! `ENVLIGHT_SHOW_DISAGREEMENTS=N` it also prints the first N rows that disagree.
 
-use envlight::light::{Density, Mapping, Sampler};
+use envlight::light::Mapping;
 use envlight::{EnvironmentLight, LightOptions, Lookup};
-use envlight_gpu::agreement::{compare, cpu_sample_rows, measure, Row};
+use envlight_gpu::agreement::{compare, cpu_sample_rows, measure, Row, PORTED};
 use envlight_gpu::{GpuDevice, GpuLight};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -24,11 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let device = GpuDevice::new()?;
     let r = device.report();
     println!("adapter: {} ({}, {})", r.name, r.backend, r.device_type);
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in PORTED {
         for mapping in Mapping::ALL {
             for lookup in [Lookup::Bilinear, Lookup::Nearest] {
                 let options = LightOptions {

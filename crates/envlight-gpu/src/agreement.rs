@@ -7,7 +7,16 @@
 //! radiances within [`RELATIVE_TOLERANCE`] of the CPU's (radiance relative to the
 //! row's largest channel).
 
+use envlight::light::{Density, Sampler};
 use envlight::{EnvironmentLight, Vec3};
+
+/// The `(sampler, density)` pairs the shader ports, which the agreement tests
+/// and the `gpu_agreement` example run through (with every mapping and lookup).
+pub const PORTED: [(Sampler, Density); 3] = [
+    (Sampler::Inversion, Density::PiecewiseConstant),
+    (Sampler::Alias, Density::PiecewiseConstant),
+    (Sampler::Inversion, Density::PiecewiseBilinear),
+];
 
 /// Largest angle between the CPU's and the GPU's direction of an agreeing row.
 pub const ANGLE_TOLERANCE: f64 = 2e-4;

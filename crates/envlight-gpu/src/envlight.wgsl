@@ -1033,6 +1033,14 @@ fn read_direction(row: u32) -> vec3<f32> {
     return vec3<f32>(inputs[4u * row], inputs[4u * row + 1u], inputs[4u * row + 2u]);
 }
 
+// Writes `v` to outputs[at], ..., outputs[at + 3].
+fn write_vec4(at: u32, v: vec4<f32>) {
+    outputs[at] = v.x;
+    outputs[at + 1u] = v.y;
+    outputs[at + 2u] = v.z;
+    outputs[at + 3u] = v.w;
+}
+
 @compute @workgroup_size(64)
 fn sample_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let row = row_index(gid, groups);
@@ -1047,15 +1055,8 @@ fn sample_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workg
         xi = vec2<f32>(inputs[2u * row], inputs[2u * row + 1u]);
     }
     let s = light_sample(xi);
-    let o = 8u * row;
-    outputs[o] = s.direction.x;
-    outputs[o + 1u] = s.direction.y;
-    outputs[o + 2u] = s.direction.z;
-    outputs[o + 3u] = s.pdf;
-    outputs[o + 4u] = s.radiance.x;
-    outputs[o + 5u] = s.radiance.y;
-    outputs[o + 6u] = s.radiance.z;
-    outputs[o + 7u] = select(0.0, 1.0, s.valid);
+    write_vec4(8u * row, vec4<f32>(s.direction, s.pdf));
+    write_vec4(8u * row + 4u, vec4<f32>(s.radiance, select(0.0, 1.0, s.valid)));
 }
 
 @compute @workgroup_size(64)
@@ -1073,11 +1074,7 @@ fn radiance_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     if row >= batch.count {
         return;
     }
-    let l = light_radiance(read_direction(row));
-    outputs[4u * row] = l.x;
-    outputs[4u * row + 1u] = l.y;
-    outputs[4u * row + 2u] = l.z;
-    outputs[4u * row + 3u] = 0.0;
+    write_vec4(4u * row, vec4<f32>(light_radiance(read_direction(row)), 0.0));
 }
 
 @compute @workgroup_size(64)
@@ -1087,8 +1084,5 @@ fn eval_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         return;
     }
     let e = light_eval(read_direction(row));
-    outputs[4u * row] = e.pdf;
-    outputs[4u * row + 1u] = e.radiance.x;
-    outputs[4u * row + 2u] = e.radiance.y;
-    outputs[4u * row + 3u] = e.radiance.z;
+    write_vec4(4u * row, vec4<f32>(e.pdf, e.radiance));
 }

@@ -164,9 +164,7 @@ pub enum ShaderError {
 /// and report.
 pub fn validate() -> Result<(Module, ModuleInfo), ShaderError> {
     let module = naga::front::wgsl::parse_str(WGSL).map_err(|e| {
-        let (line, column) = e
-            .location(WGSL)
-            .map_or((0, 0), |l| (l.line_number, l.line_position));
+        let (line, column) = line_column(e.location(WGSL));
         ShaderError::Parse {
             line,
             column,
@@ -177,9 +175,7 @@ pub fn validate() -> Result<(Module, ModuleInfo), ShaderError> {
     let info = Validator::new(ValidationFlags::all(), CAPABILITIES)
         .validate(&module)
         .map_err(|e| {
-            let (line, column) = e
-                .location(WGSL)
-                .map_or((0, 0), |l| (l.line_number, l.line_position));
+            let (line, column) = line_column(e.location(WGSL));
             ShaderError::Validation {
                 line,
                 column,
@@ -188,6 +184,11 @@ pub fn validate() -> Result<(Module, ModuleInfo), ShaderError> {
             }
         })?;
     Ok((module, info))
+}
+
+/// A naga error's `(line, column)` in [`WGSL`], `(0, 0)` where it has none.
+fn line_column(location: Option<naga::SourceLocation>) -> (u32, u32) {
+    location.map_or((0, 0), |l| (l.line_number, l.line_position))
 }
 
 /// The compute shader of `entry_point` (one of [`ENTRY_POINTS`]) in `lang`:

@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 use envlight::gpu::GpuTableOptions;
 use envlight::light::{Density, Mapping, Sampler};
 use envlight::{EnvImage, EnvironmentLight, LightOptions, Lookup, Rotation};
-use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Agreement, Row};
+use envlight_gpu::agreement::{compare, cpu_eval_rows, cpu_sample_rows, Agreement, Row, PORTED};
 use envlight_gpu::{shader, GpuDevice, GpuLight, GpuSphereSampler};
 use envlight_verify::{maps, Config, Integrand, SphereSampler};
 
@@ -73,11 +73,7 @@ fn options(sampler: Sampler, density: Density, mapping: Mapping, lookup: Lookup)
 /// Every ported combination: (sampler, density) × mapping × lookup.
 fn ported() -> Vec<(String, LightOptions)> {
     let mut out = Vec::new();
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in PORTED {
         for mapping in Mapping::ALL {
             for lookup in [Lookup::Nearest, Lookup::Bilinear] {
                 let name = format!(
@@ -92,11 +88,7 @@ fn ported() -> Vec<(String, LightOptions)> {
     }
     // The node lookup: lat-long maps, either density (the bilinear one's nodes on
     // the rows, pole to pole).
-    for (sampler, density) in [
-        (Sampler::Inversion, Density::PiecewiseConstant),
-        (Sampler::Alias, Density::PiecewiseConstant),
-        (Sampler::Inversion, Density::PiecewiseBilinear),
-    ] {
+    for (sampler, density) in PORTED {
         let name = format!("{} {} node", sampler.name(), density.name());
         out.push((
             name,
@@ -161,6 +153,13 @@ fn assert_agrees(case: &str, gpu: &GpuLight, light: &EnvironmentLight) {
     assert!(e.passes(), "[{case}] eval rows disagree: {e}");
 }
 
+/// [`assert_agrees`] for the light of `image` under `o`, uploaded to `device`.
+fn assert_light_agrees(case: &str, device: &GpuDevice, image: EnvImage, o: LightOptions) {
+    let light = EnvironmentLight::new(image, o).unwrap();
+    let gpu = GpuLight::new(device, &light).unwrap();
+    assert_agrees(case, &gpu, &light);
+}
+
 #[test]
 fn every_ported_combination_agrees_with_the_cpu() {
     let Some(device) = device() else { return };
@@ -169,9 +168,7 @@ fn every_ported_combination_agrees_with_the_cpu() {
             ("sun-sky 96x48", sun_sky(96, 48)),
             ("random 40x20", maps::random(40, 20, 3)),
         ] {
-            let light = EnvironmentLight::new(image, o).unwrap();
-            let gpu = GpuLight::new(device, &light).unwrap();
-            assert_agrees(&format!("{name}, {map_name}"), &gpu, &light);
+            assert_light_agrees(&format!("{name}, {map_name}"), device, image, o);
         }
     }
 }
@@ -228,9 +225,7 @@ fn rotation_scale_compensation_and_reduced_tables_agree() {
         ),
     ];
     for (name, o) in cases {
-        let light = EnvironmentLight::new(sun_sky(96, 48), o).unwrap();
-        let gpu = GpuLight::new(device, &light).unwrap();
-        assert_agrees(name, &gpu, &light);
+        assert_light_agrees(name, device, sun_sky(96, 48), o);
     }
 }
 
@@ -239,13 +234,10 @@ fn degenerate_maps_agree() {
     let Some(device) = device() else { return };
     for (name, o) in ported() {
         // One texel: the whole sphere is one cell.
-        let light = EnvironmentLight::new(maps::constant(1, 1), o).unwrap();
-        let gpu = GpuLight::new(device, &light).unwrap();
-        assert_agrees(&format!("{name}, 1x1"), &gpu, &light);
+        assert_light_agrees(&format!("{name}, 1x1"), device, maps::constant(1, 1), o);
         // One hot texel on a pole row.
-        let light = EnvironmentLight::new(maps::hot(32, 16, 5, 0), o).unwrap();
-        let gpu = GpuLight::new(device, &light).unwrap();
-        assert_agrees(&format!("{name}, hot texel on the top row"), &gpu, &light);
+        let hot = maps::hot(32, 16, 5, 0);
+        assert_light_agrees(&format!("{name}, hot texel on the top row"), device, hot, o);
         // All black: no sample, pdf 0 everywhere.
         let light = EnvironmentLight::new(maps::black(16, 8), o).unwrap();
         let gpu = GpuLight::new(device, &light).unwrap();
@@ -324,9 +316,7 @@ fn real_maps_agree() {
                 },
             ),
         ] {
-            let light = EnvironmentLight::new(image.clone(), o).unwrap();
-            let gpu = GpuLight::new(device, &light).unwrap();
-            assert_agrees(&format!("{file}, {name}"), &gpu, &light);
+            assert_light_agrees(&format!("{file}, {name}"), device, image.clone(), o);
         }
     }
 }

@@ -13,6 +13,7 @@
 
 use crate::checks::chi_square::pearson;
 use crate::checks::consistency::{consistency, Consistency};
+use crate::param::to_f64;
 use crate::quadrature::gauss_legendre;
 use crate::report::{sig, Row, Verdict};
 use crate::sampler::{sphere_sample, SphereSample, SphereSampler};
@@ -43,9 +44,6 @@ fn cross(a: D3, b: D3) -> D3 {
 fn norm(a: D3) -> f64 {
     dot(a, a).sqrt()
 }
-fn d3(v: Vec3) -> D3 {
-    [v.x as f64, v.y as f64, v.z as f64]
-}
 
 /// A convex quad as the harness sees it: the bilinear patch
 /// `X(a, b) = (1−a)(1−b) c₀ + a(1−b) c₁ + ab c₂ + (1−a)b c₃` over `[0, 1]²`.
@@ -59,7 +57,7 @@ pub struct Quad {
 impl Quad {
     /// The quad through four corners in order around it.
     pub fn new(corners: [Vec3; 4]) -> Self {
-        let c = corners.map(d3);
+        let c = corners.map(to_f64);
         let nn = cross(sub(c[2], c[0]), sub(c[3], c[1]));
         let len = norm(nn);
         let n = [nn[0] / len, nn[1] / len, nn[2] / len];
@@ -151,7 +149,7 @@ impl<'a> AtPortalPoint<'a> {
         Self {
             light,
             point: light.at(p),
-            p: d3(p),
+            p: to_f64(p),
             quads: corners.iter().map(|&c| Quad::new(c)).collect(),
             variant: PortalVariant::Exact,
         }
@@ -186,7 +184,7 @@ impl<'a> AtPortalPoint<'a> {
 
     /// Whether the ray along `direction` crosses one of the true portals.
     pub fn through(&self, direction: Vec3) -> bool {
-        self.classify(d3(direction)).0.is_some()
+        self.classify(to_f64(direction)).0.is_some()
     }
 
     fn density(&self, direction: Vec3) -> f32 {
@@ -395,7 +393,7 @@ pub fn run_portal(s: &AtPortalPoint, cfg: &PortalConfig) -> PortalReport {
                 if y > 0.0 {
                     if p > 0.0 {
                         y2p += y * y / p as f64 * q.weight;
-                    } else if s.classify(d3(q.direction)).1 > PORTAL_EDGE_BAND {
+                    } else if s.classify(to_f64(q.direction)).1 > PORTAL_EDGE_BAND {
                         support_failures += 1;
                     }
                 }
@@ -422,7 +420,7 @@ pub fn run_portal(s: &AtPortalPoint, cfg: &PortalConfig) -> PortalReport {
                 } else {
                     f64::INFINITY
                 });
-                let (first, margin) = s.classify(d3(smp.direction));
+                let (first, margin) = s.classify(to_f64(smp.direction));
                 if margin <= PORTAL_EDGE_BAND {
                     acc.2 += 1;
                 }
@@ -464,7 +462,7 @@ pub fn run_portal(s: &AtPortalPoint, cfg: &PortalConfig) -> PortalReport {
                 let phi: f64 = rng.random::<f64>() * std::f64::consts::TAU;
                 let r = (1.0 - z * z).max(0.0).sqrt();
                 let d = Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
-                let (first, margin) = s.classify(d3(d));
+                let (first, margin) = s.classify(to_f64(d));
                 if first.is_none() && margin > PORTAL_EDGE_BAND {
                     outside += 1;
                     if s.pdf(d) != 0.0 {

@@ -1,7 +1,7 @@
 //! A product sampler at one shading point, as a [`SphereSampler`] (docs/design.md §6a).
 
 use crate::integrand::Integrand;
-use crate::sampler::{sphere_sample, Grid, SphereSample, SphereSampler};
+use crate::sampler::{product_point_methods, sphere_sample, SphereSample, SphereSampler};
 use envlight::{EnvironmentLight, Factor, ProductSampler, ShadingPoint, Vec3};
 
 /// [`ProductSampler`] conditioned on one [`Factor`]: what the checks see of a
@@ -80,23 +80,7 @@ impl SphereSampler for AtShadingPoint<'_> {
     fn pdf(&self, direction: Vec3) -> f32 {
         self.point.pdf(direction)
     }
-    fn invert(&self, _: Vec3) -> Option<[f32; 2]> {
-        None
-    }
-    fn radiance(&self, direction: Vec3) -> [f32; 3] {
-        self.light().radiance(direction)
-    }
-    fn integral_luminance(&self) -> f64 {
-        self.light().integral_luminance()
-    }
-    fn grid(&self) -> Option<Grid> {
-        SphereSampler::grid(self.light())
-    }
-    fn fold(&self) -> Option<(Vec3, f32)> {
-        // The horizon's band: its draws are reflected above the horizon.
-        let f = self.factor.normalized()?;
-        Some((f.normal(), self.point.horizon_band()))
-    }
+    product_point_methods!(horizon_band_of: point);
     fn pdf_batch(&self, directions: &[Vec3], out: &mut [f32]) {
         // As `sample_batch`: `sampler.at(factor).pdf(ω)` per direction.
         let factors = vec![self.factor; directions.len()];

@@ -146,6 +146,33 @@ pub trait SphereSampler: Sync {
     }
 }
 
+/// The methods a product-point sampler's [`SphereSampler`] impl ends with: no
+/// inverse; radiance, integral and grid from its light (`self.light()`); the fold
+/// from the factor's normal (`self.factor`) and the horizon band of the
+/// [`envlight::ShadingPoint`] at `self.<field>`, whose draws there are reflected
+/// above the horizon.
+macro_rules! product_point_methods {
+    (horizon_band_of: $field:ident) => {
+        fn invert(&self, _: envlight::Vec3) -> Option<[f32; 2]> {
+            None
+        }
+        fn radiance(&self, direction: envlight::Vec3) -> [f32; 3] {
+            self.light().radiance(direction)
+        }
+        fn integral_luminance(&self) -> f64 {
+            self.light().integral_luminance()
+        }
+        fn grid(&self) -> Option<$crate::sampler::Grid> {
+            $crate::sampler::SphereSampler::grid(self.light())
+        }
+        fn fold(&self) -> Option<(envlight::Vec3, f32)> {
+            let f = self.factor.normalized()?;
+            Some((f.normal(), self.$field.horizon_band()))
+        }
+    };
+}
+pub(crate) use product_point_methods;
+
 /// The harness's view of a light's sample (without its image point).
 pub(crate) fn sphere_sample(s: LightSample) -> SphereSample {
     SphereSample {

@@ -8,7 +8,7 @@
 //! unoccluded integrand `Y · cos⁺`, as the product sampler is.
 
 use crate::integrand::Integrand;
-use crate::sampler::{sphere_sample, Grid, SphereSample, SphereSampler};
+use crate::sampler::{product_point_methods, sphere_sample, SphereSample, SphereSampler};
 use envlight::visibility::{VisibilityCache, VisibilityPoint};
 use envlight::{EnvironmentLight, Factor, ShadingPoint, Vec3};
 
@@ -120,21 +120,6 @@ impl SphereSampler for AtVisibilityPoint<'_> {
             VisibilityVariant::EntryOf(_) => self.pdf_point.pdf(direction),
         }
     }
-    fn invert(&self, _: Vec3) -> Option<[f32; 2]> {
-        None
-    }
-    fn radiance(&self, direction: Vec3) -> [f32; 3] {
-        self.light().radiance(direction)
-    }
-    fn integral_luminance(&self) -> f64 {
-        self.light().integral_luminance()
-    }
-    fn grid(&self) -> Option<Grid> {
-        SphereSampler::grid(self.light())
-    }
-    fn fold(&self) -> Option<(Vec3, f32)> {
-        // The product share's horizon band (its draws there are reflected).
-        let f = self.factor.normalized()?;
-        Some((f.normal(), self.product.horizon_band()))
-    }
+    // The fold is the product share's horizon band.
+    product_point_methods!(horizon_band_of: product);
 }

@@ -23,7 +23,9 @@
 //!
 //! [`Distribution2D`]: crate::distribution::Distribution2D
 
-use crate::distribution::{cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D};
+use crate::distribution::{
+    grid_2d_accessors, grid_rows, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D,
+};
 
 /// `2⁴⁸`: the two 24-bit halves of `ξ` form a 48-bit fixed-point number.
 const TWO_POW_48: f64 = (1u64 << 48) as f64;
@@ -87,16 +89,12 @@ impl AliasTable2D {
     /// When `nu == 0`, `f` is empty, `f.len()` is not a multiple of `nu`, or there
     /// are more than `u32::MAX` cells.
     pub fn new(f: &[f32], nu: usize) -> Self {
-        assert!(
-            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
-            "bad 2D grid shape"
-        );
+        let nv = grid_rows(f, nu);
         assert!(
             f.len() <= u32::MAX as usize,
             "too many cells for an alias table"
         );
         let n = f.len();
-        let nv = n / nu;
         let func: Vec<f32> = f.iter().map(|&x| sanitize(x)).collect();
         // The same summation order as Distribution2D, so the integrals agree to the bit.
         let integral = func
@@ -130,23 +128,18 @@ impl AliasTable2D {
         }
     }
 
-    /// Grid width (cells along u).
-    #[inline]
-    pub fn nu(&self) -> usize {
-        self.nu
-    }
-
-    /// Grid height (cells along v).
-    #[inline]
-    pub fn nv(&self) -> usize {
-        self.nv
-    }
-
-    /// `I = ∫∫ f du dv = Σ f / (nu nv)`.
-    #[inline]
-    pub fn integral(&self) -> f64 {
-        self.integral
-    }
+    grid_2d_accessors!(
+        integral: integral,
+        cell_pdf: cell_pdf,
+        /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`] in O(1).
+        ///
+        /// The two 24-bit halves `⌊2²⁴ ξ0⌋, ⌊2²⁴ ξ1⌋` form a 48-bit fraction `B`
+        /// (ξ0 the high half). `B n` splits, exactly, into the slot (its integer part)
+        /// and a 48-bit fraction that makes the keep-or-alias test; the fraction left
+        /// over from that test, rescaled to `[0, 1)`, gives the offset along u (its top
+        /// bits) and along v (the rest). Components outside `[0, 1)` or NaN are clamped.
+        sample_continuous,
+    );
 
     /// The (sanitised) function, row-major.
     #[inline]
@@ -200,24 +193,6 @@ impl AliasTable2D {
     #[inline(always)]
     fn value_pdf(&self, value: f32) -> f32 {
         (value as f64 * self.inv_integral) as f32
-    }
-
-    /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline(always)]
-    pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
-    }
-
-    /// Maps `ξ ∈ [0, 1)²` to a point with density [`Self::pdf`] in O(1).
-    ///
-    /// The two 24-bit halves `⌊2²⁴ ξ0⌋, ⌊2²⁴ ξ1⌋` form a 48-bit fraction `B`
-    /// (ξ0 the high half). `B n` splits, exactly, into the slot (its integer part)
-    /// and a 48-bit fraction that makes the keep-or-alias test; the fraction left
-    /// over from that test, rescaled to `[0, 1)`, gives the offset along u (its top
-    /// bits) and along v (the rest). Components outside `[0, 1)` or NaN are clamped.
-    #[inline(always)]
-    pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        self.sample_continuous_hinted(xi, |_| {})
     }
 
     /// [`Self::sample_continuous`], telling `hint` the centre of the chosen cell as
@@ -394,15 +369,18 @@ pub(crate) mod test_support {
     /// Checks a sampler's cell pdfs against `f / I` to f32 rounding, and the
     /// inversion sampler's against the same to its CDFs' resolution (each edge is
     /// rounded by at most half a unit, so a cell of widths `wu`, `wv` is within
-    /// `1/wu + 1/wv` relative); `pdf` at each cell centre must be the cell pdf.
+    /// `1/wu + 1/wv` relative); `pdf` at each cell centre must be the cell pdf, and
+    /// the sampler's `integral` the inversion sampler's, to the bit.
     pub(crate) fn assert_pdf_is_f_over_integral(
         f: &[f32],
         nu: usize,
+        integral: f64,
         cell_pdf: impl Fn(usize, usize) -> f32,
         pdf: impl Fn([f32; 2]) -> f32,
     ) {
         let nv = f.len() / nu;
         let inversion = crate::distribution::Distribution2D::new(f, nu);
+        assert_eq!(integral, inversion.integral());
         for iv in 0..nv {
             for iu in 0..nu {
                 let exact = (f[iv * nu + iu] as f64 / inversion.integral()) as f32;
@@ -457,6 +435,76 @@ pub(crate) mod test_support {
         (stat, dof, p)
     }
 
+    /// The counts `n` samples of a density `∝ f` are expected to put in each cell.
+    pub(crate) fn expected_counts(f: &[f32], n: u64) -> Vec<f64> {
+        let total: f64 = f.iter().map(|&x| x as f64).sum();
+        f.iter().map(|&x| x as f64 / total * n as f64).collect()
+    }
+
+    /// Asserts that `counts` of `n` samples fit the density `∝ f` (χ² at α = 1e-3).
+    pub(crate) fn assert_counts_fit(counts: &[u64], f: &[f32], n: u64, what: &str) {
+        let (stat, dof, p) = chi_square(counts, &expected_counts(f, n));
+        assert!(p > 1e-3, "{what}: chi2 {stat} dof {dof} p {p}");
+    }
+
+    /// Asserts that the same test rejects `counts` of `n` samples of `∝ f` against
+    /// a wrong density: `f` with its largest value 10 % higher.
+    pub(crate) fn assert_rejects_hottest_raised(counts: &[u64], f: &[f32], n: u64) {
+        let mut wrong = f.to_vec();
+        let hot = (0..wrong.len())
+            .max_by(|&a, &b| wrong[a].total_cmp(&wrong[b]))
+            .unwrap();
+        wrong[hot] *= 1.1;
+        let (_, _, p) = chi_square(counts, &expected_counts(&wrong, n));
+        assert!(
+            p < 1e-3,
+            "a 10 % error in the hottest cell went unnoticed (p = {p})"
+        );
+    }
+
+    /// What a sampler of a function with no positive mass must do, given its
+    /// integral and queries: integral 0, finite samples of pdf 0, pdf 0
+    /// everywhere and finite inverses.
+    pub(crate) fn assert_zero_function(
+        integral: f64,
+        sample: impl Fn([f32; 2]) -> crate::distribution::Sample2D,
+        pdf: impl Fn([f32; 2]) -> f32,
+        invert: impl Fn([f32; 2]) -> [f32; 2],
+    ) {
+        assert_eq!(integral, 0.0);
+        let s = sample([0.3, 0.7]);
+        assert_eq!(s.pdf, 0.0);
+        assert!(s.uv.iter().all(|x| x.is_finite()));
+        assert_eq!(pdf([0.5, 0.5]), 0.0);
+        assert!(invert([0.2, 0.4]).iter().all(|x| x.is_finite()));
+    }
+
+    /// The timing tests' grids as `(nu, nv, f)`: random values (none 0) on
+    /// 4096×2048 cells (out of cache) and 64×32 (in cache).
+    pub(crate) fn timing_grids() -> impl Iterator<Item = (usize, usize, Vec<f32>)> {
+        [(4096, 2048), (64, 32)].into_iter().map(|(nu, nv)| {
+            let mut rng = SplitMix64::new(1);
+            (nu, nv, random_grid(&mut rng, nu * nv, 0.0))
+        })
+    }
+
+    /// For the timing tests against the inversion sampler: times `inversion`'s
+    /// sampling over 2 000 000 counter-based ξ (`xi_2d`, no coherence) and returns
+    /// `time(name, run)`, which times `run` over the same ξ, labelled `{grid} {name}`.
+    pub(crate) fn timer_against_inversion(
+        grid: String,
+        inversion: &crate::distribution::Distribution2D,
+    ) -> impl Fn(&str, &dyn Fn([f32; 2]) -> f32) {
+        let xi: Vec<[f32; 2]> = (0..2_000_000).map(|k| crate::rng::xi_2d(2, k)).collect();
+        let time = move |name: &str, run: &dyn Fn([f32; 2]) -> f32| {
+            time_per_call(&format!("{grid} {name}"), &xi, run)
+        };
+        time("inversion sample", &|x| {
+            inversion.sample_continuous(x).uv[0]
+        });
+        time
+    }
+
     /// Nanoseconds this thread has spent on a CPU (Linux `schedstat`), so timings
     /// on a loaded machine are not inflated by time spent descheduled; `None`
     /// where unavailable.
@@ -487,7 +535,7 @@ pub(crate) mod test_support {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::distribution::{Distribution2D, ONE_MINUS_EPSILON};
+    use crate::distribution::{cell_index, Distribution2D, ONE_MINUS_EPSILON};
     use crate::rng::{xi_2d, SplitMix64};
 
     /// Significance level of every chi-square test here.
@@ -559,11 +607,10 @@ mod tests {
         for &(nu, nv) in &[(1, 1), (7, 3), (64, 32), (5, 17), (300, 1)] {
             let f = test_support::random_grid(&mut rng, nu * nv, 0.3);
             let alias = AliasTable2D::new(&f, nu);
-            let inversion = Distribution2D::new(&f, nu);
-            assert_eq!(alias.integral(), inversion.integral());
             test_support::assert_pdf_is_f_over_integral(
                 &f,
                 nu,
+                alias.integral(),
                 |iu, iv| alias.cell_pdf(iu, iv),
                 |uv| alias.pdf(uv),
             );
@@ -607,14 +654,7 @@ mod tests {
             let t = AliasTable2D::new(&f, nu);
             let n = 400_000;
             let counts = cell_counts(&t, n, 3 + seed as u64);
-            let total: f64 = t.func.iter().map(|&x| x as f64).sum();
-            let expected: Vec<f64> = t
-                .func
-                .iter()
-                .map(|&x| x as f64 / total * n as f64)
-                .collect();
-            let (stat, dof, p) = test_support::chi_square(&counts, &expected);
-            assert!(p > ALPHA, "{nu}x{nv}: chi2 {stat} dof {dof} p {p}");
+            test_support::assert_counts_fit(&counts, &t.func, n, &format!("{nu}x{nv}"));
         }
     }
 
@@ -628,18 +668,7 @@ mod tests {
         let t = AliasTable2D::new(&f, 16);
         let n = 400_000;
         let counts = cell_counts(&t, n, 8);
-        let mut wrong: Vec<f64> = t.func.iter().map(|&x| x as f64).collect();
-        let hot = (0..wrong.len())
-            .max_by(|&a, &b| wrong[a].total_cmp(&wrong[b]))
-            .unwrap();
-        wrong[hot] *= 1.1;
-        let total: f64 = wrong.iter().sum();
-        let expected: Vec<f64> = wrong.iter().map(|&x| x / total * n as f64).collect();
-        let (_, _, p) = test_support::chi_square(&counts, &expected);
-        assert!(
-            p < ALPHA,
-            "a 10 % error in the hottest cell went unnoticed (p = {p})"
-        );
+        test_support::assert_rejects_hottest_raised(&counts, &t.func, n);
     }
 
     #[test]
@@ -702,9 +731,11 @@ mod tests {
     }
 
     #[test]
-    fn is_send_and_sync() {
+    fn samplers_are_send_and_sync() {
         fn check<T: Send + Sync>() {}
         check::<AliasTable2D>();
+        check::<crate::hierarchical::Hierarchical2D>();
+        check::<crate::bilinear::BilinearDistribution2D>();
     }
 
     /// Per-sample cost against the inversion sampler on random grids of 4096×2048
@@ -713,22 +744,14 @@ mod tests {
     #[test]
     #[ignore]
     fn timing_against_inversion() {
-        for (nu, nv) in [(4096, 2048), (64, 32)] {
-            let mut rng = SplitMix64::new(1);
-            let f = test_support::random_grid(&mut rng, nu * nv, 0.0);
+        for (nu, nv, f) in test_support::timing_grids() {
             let start = std::time::Instant::now();
             let alias = AliasTable2D::new(&f, nu);
             let build_alias = start.elapsed();
             let start = std::time::Instant::now();
             let inversion = Distribution2D::new(&f, nu);
             let build_inversion = start.elapsed();
-            let xi: Vec<[f32; 2]> = (0..2_000_000).map(|k| xi_2d(2, k)).collect();
-            let time = |name: &str, run: &dyn Fn([f32; 2]) -> f32| {
-                test_support::time_per_call(&format!("{nu}x{nv} {name}"), &xi, run)
-            };
-            time("inversion sample", &|x| {
-                inversion.sample_continuous(x).uv[0]
-            });
+            let time = test_support::timer_against_inversion(format!("{nu}x{nv}"), &inversion);
             time("alias sample", &|x| alias.sample_continuous(x).uv[0]);
             time("alias pdf", &|x| alias.pdf(x));
             println!(

@@ -1751,12 +1751,12 @@ mod tests {
             &[0.0, 1.0],
             &[0.0, 1.0],
         );
-        assert_eq!(d.integral(), 0.0);
-        let s = d.sample_continuous([0.3, 0.7]);
-        assert_eq!(s.pdf, 0.0);
-        assert!(s.uv.iter().all(|x| x.is_finite()));
-        assert_eq!(d.pdf([0.5, 0.5]), 0.0);
-        assert!(d.invert([0.2, 0.4]).iter().all(|x| x.is_finite()));
+        test_support::assert_zero_function(
+            d.integral(),
+            |xi| d.sample_continuous(xi),
+            |uv| d.pdf(uv),
+            |uv| d.invert(uv),
+        );
         let ok = [0.0, 1.0];
         assert!(BilinearDistribution2D::try_new(&[1.0; 4], &[0.0], &ok).is_err());
         // Repeated nodes are a zero-width patch, allowed; decreasing ones are not.
@@ -1941,12 +1941,6 @@ mod tests {
         );
     }
 
-    #[test]
-    fn is_send_and_sync() {
-        fn check<T: Send + Sync>() {}
-        check::<BilinearDistribution2D>();
-    }
-
     /// Per-sample cost against the piecewise-constant inversion sampler, with nodes
     /// at the texel centres of a 4096×2048 random image (4098×2050 nodes) and of a
     /// 64×32 one. Run: `cargo test --release -p envlight --lib
@@ -1964,13 +1958,7 @@ mod tests {
             let d = BilinearDistribution2D::new(&values, &u, &v);
             let build = start.elapsed();
             let inversion = crate::distribution::Distribution2D::new(&texels, w);
-            let xi: Vec<[f32; 2]> = (0..2_000_000).map(|k| xi_2d(2, k)).collect();
-            let time = |name: &str, run: &dyn Fn([f32; 2]) -> f32| {
-                test_support::time_per_call(&format!("{w}x{h} {name}"), &xi, run)
-            };
-            time("inversion sample", &|x| {
-                inversion.sample_continuous(x).uv[0]
-            });
+            let time = test_support::timer_against_inversion(format!("{w}x{h}"), &inversion);
             time("bilinear sample", &|x| d.sample_continuous(x).uv[0]);
             time("bilinear pdf", &|x| d.pdf(x));
             time("bilinear invert", &|x| d.invert(x)[0]);

@@ -381,6 +381,69 @@ fn nudge_into_cell_lanes<const N: usize>(x: &[f32; N], cell: &[u32; N], n: usize
     out
 }
 
+/// The accessors every 2D grid sampler shares, with the same docs: `nu()`,
+/// `nv()`, `integral()` (read from the named field path) and `pdf(uv)` (the named
+/// cell-pdf method at the cell of `uv`); with `sample_continuous` (and its docs)
+/// also the plain wrapper around the type's `sample_continuous_hinted`.
+macro_rules! grid_2d_accessors {
+    (integral: $($integral:ident).+, cell_pdf: $cell_pdf:ident $(,)?) => {
+        /// Grid width (cells along u).
+        #[inline]
+        pub fn nu(&self) -> usize {
+            self.nu
+        }
+
+        /// Grid height (cells along v).
+        #[inline]
+        pub fn nv(&self) -> usize {
+            self.nv
+        }
+
+        /// `I = ∫∫ f du dv = Σ f / (nu nv)`.
+        #[inline]
+        pub fn integral(&self) -> f64 {
+            self.$($integral).+
+        }
+
+        /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
+        #[inline(always)]
+        pub fn pdf(&self, uv: [f32; 2]) -> f32 {
+            self.$cell_pdf(
+                $crate::distribution::cell_index(uv[0], self.nu),
+                $crate::distribution::cell_index(uv[1], self.nv),
+            )
+        }
+    };
+    (
+        integral: $($integral:ident).+,
+        cell_pdf: $cell_pdf:ident,
+        $(#[$sample_doc:meta])*
+        sample_continuous $(,)?
+    ) => {
+        $crate::distribution::grid_2d_accessors!(integral: $($integral).+, cell_pdf: $cell_pdf);
+
+        $(#[$sample_doc])*
+        #[inline(always)]
+        pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
+            self.sample_continuous_hinted(xi, |_| {})
+        }
+    };
+}
+pub(crate) use grid_2d_accessors;
+
+/// The number of rows of the row-major grid `f` with `nu` values per row.
+///
+/// # Panics
+/// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
+#[track_caller]
+pub(crate) fn grid_rows(f: &[f32], nu: usize) -> usize {
+    assert!(
+        nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
+        "bad 2D grid shape"
+    );
+    f.len() / nu
+}
+
 /// The cell of `x ∈ [0, 1]` on a grid of `n` cells, `⌊x n⌋` clamped to `[0, n-1]`.
 /// Every lookup (pdf, invert) and every sample placement goes through this one
 /// function, so they agree about which cell a point is in.
@@ -840,11 +903,7 @@ impl Distribution2D {
     /// # Panics
     /// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
     pub fn new(f: &[f32], nu: usize) -> Self {
-        assert!(
-            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
-            "bad 2D grid shape"
-        );
-        Self::from_rows(nu, f.len() / nu, |v, row| {
+        Self::from_rows(nu, grid_rows(f, nu), |v, row| {
             row.copy_from_slice(&f[v * nu..(v + 1) * nu]);
         })
     }
@@ -911,23 +970,13 @@ impl Distribution2D {
         )
     }
 
-    /// Grid width (cells along u).
-    #[inline]
-    pub fn nu(&self) -> usize {
-        self.nu
-    }
-
-    /// Grid height (cells along v).
-    #[inline]
-    pub fn nv(&self) -> usize {
-        self.nv
-    }
-
-    /// `I = ∫∫ f du dv = Σ f / (nu nv)`.
-    #[inline]
-    pub fn integral(&self) -> f64 {
-        self.marginal.integral
-    }
+    grid_2d_accessors!(
+        integral: marginal.integral,
+        cell_pdf: cell_pdf_in_grid,
+        /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`
+        /// picks the row from the marginal, `ξ0` the position within that row.
+        sample_continuous,
+    );
 
     /// The marginal distribution over rows (built from the rows' integrals).
     #[inline]
@@ -1087,19 +1136,6 @@ impl Distribution2D {
     #[inline(always)]
     fn pdf_of_widths(&self, wu: u32, wv: u32) -> f32 {
         (wu as f64 * wv as f64 * self.pdf_scale) as f32
-    }
-
-    /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline(always)]
-    pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf_in_grid(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
-    }
-
-    /// Maps `ξ = [ξ0, ξ1] ∈ [0, 1)²` to a point with density [`Self::pdf`]: `ξ1`
-    /// picks the row from the marginal, `ξ0` the position within that row.
-    #[inline(always)]
-    pub fn sample_continuous(&self, xi: [f32; 2]) -> Sample2D {
-        self.sample_continuous_hinted(xi, |_| {})
     }
 
     /// [`Self::sample_continuous`], telling `hint` an early estimate of the point

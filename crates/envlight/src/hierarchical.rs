@@ -24,7 +24,8 @@
 //! warp is invertible step by step ([`Hierarchical2D::invert`]).
 
 use crate::distribution::{
-    cell_index, inverse_or_zero, place_in_cell_f64, sanitize, Sample2D, ONE_MINUS_EPSILON,
+    cell_index, grid_2d_accessors, grid_rows, inverse_or_zero, place_in_cell_f64, sanitize,
+    Sample2D, ONE_MINUS_EPSILON,
 };
 use crate::math::{unit_interval, BELOW_ONE};
 
@@ -107,11 +108,7 @@ impl Hierarchical2D {
     /// # Panics
     /// When `nu == 0`, `f` is empty, or `f.len()` is not a multiple of `nu`.
     pub fn new(f: &[f32], nu: usize) -> Self {
-        assert!(
-            nu > 0 && !f.is_empty() && f.len().is_multiple_of(nu),
-            "bad 2D grid shape"
-        );
-        let nv = f.len() / nu;
+        let nv = grid_rows(f, nu);
         let cells: Vec<f32> = f.iter().map(|&x| sanitize(x)).collect();
         let row_sums: Vec<f64> = cells
             .chunks(nu)
@@ -187,23 +184,7 @@ impl Hierarchical2D {
         }
     }
 
-    /// Grid width (cells along u).
-    #[inline]
-    pub fn nu(&self) -> usize {
-        self.nu
-    }
-
-    /// Grid height (cells along v).
-    #[inline]
-    pub fn nv(&self) -> usize {
-        self.nv
-    }
-
-    /// `I = ∫∫ f du dv = Σ f / (nu nv)`.
-    #[inline]
-    pub fn integral(&self) -> f64 {
-        self.integral
-    }
+    grid_2d_accessors!(integral: integral, cell_pdf: cell_pdf);
 
     /// The (sanitised) function value of cell `[iu, iv]`.
     #[inline]
@@ -226,12 +207,6 @@ impl Hierarchical2D {
         } else {
             0.0
         }
-    }
-
-    /// Density at `(u, v) ∈ [0, 1]²` (points outside are clamped onto the square).
-    #[inline(always)]
-    pub fn pdf(&self, uv: [f32; 2]) -> f32 {
-        self.cell_pdf(cell_index(uv[0], self.nu), cell_index(uv[1], self.nv))
     }
 
     /// The block `[a, b, c, d]` starting at `index`; zeros past the end (a
@@ -448,11 +423,10 @@ mod tests {
         for &(nu, nv) in &SHAPES {
             let f = test_support::random_grid(&mut rng, nu * nv, 0.3);
             let h = Hierarchical2D::new(&f, nu);
-            let inversion = Distribution2D::new(&f, nu);
-            assert_eq!(h.integral(), inversion.integral());
             test_support::assert_pdf_is_f_over_integral(
                 &f,
                 nu,
+                h.integral(),
                 |iu, iv| h.cell_pdf(iu, iv),
                 |uv| h.pdf(uv),
             );
@@ -474,11 +448,6 @@ mod tests {
         counts
     }
 
-    fn expected_counts(f: &[f32], n: u64) -> Vec<f64> {
-        let total: f64 = f.iter().map(|&x| x as f64).sum();
-        f.iter().map(|&x| x as f64 / total * n as f64).collect()
-    }
-
     #[test]
     fn chi_square_fit_on_random_grids() {
         // α = 1e-3, N = 300 000 per shape, ξ = xi_2d(40 + shape index, k).
@@ -488,8 +457,7 @@ mod tests {
             let h = Hierarchical2D::new(&f, nu);
             let n = 300_000;
             let counts = cell_counts(&h, (0..n).map(|k| xi_2d(40 + i as u64, k)));
-            let (stat, dof, p) = test_support::chi_square(&counts, &expected_counts(&f, n));
-            assert!(p > ALPHA, "{nu}x{nv}: chi2 {stat} dof {dof} p {p}");
+            test_support::assert_counts_fit(&counts, &f, n, &format!("{nu}x{nv}"));
         }
     }
 
@@ -502,13 +470,7 @@ mod tests {
         let h = Hierarchical2D::new(&f, 12);
         let n = 300_000;
         let counts = cell_counts(&h, (0..n).map(|k| xi_2d(9, k)));
-        let mut wrong = f.clone();
-        let hot = (0..wrong.len())
-            .max_by(|&a, &b| wrong[a].total_cmp(&wrong[b]))
-            .unwrap();
-        wrong[hot] *= 1.1;
-        let (_, _, p) = test_support::chi_square(&counts, &expected_counts(&wrong, n));
-        assert!(p < ALPHA, "p = {p}");
+        test_support::assert_rejects_hottest_raised(&counts, &f, n);
     }
 
     #[test]
@@ -619,12 +581,12 @@ mod tests {
     #[test]
     fn degenerate_inputs() {
         let h = Hierarchical2D::new(&[0.0, f32::NAN, -1.0, f32::NEG_INFINITY, 0.0, 0.0], 3);
-        assert_eq!(h.integral(), 0.0);
-        let s = h.sample_continuous([0.3, 0.7]);
-        assert_eq!(s.pdf, 0.0);
-        assert!(s.uv.iter().all(|x| x.is_finite()));
-        assert_eq!(h.pdf([0.5, 0.5]), 0.0);
-        assert!(h.invert([0.2, 0.9]).iter().all(|x| x.is_finite()));
+        test_support::assert_zero_function(
+            h.integral(),
+            |xi| h.sample_continuous(xi),
+            |uv| h.pdf(uv),
+            |uv| h.invert(uv),
+        );
         let h = Hierarchical2D::new(&[5.0], 1);
         let s = h.sample_continuous([0.25, 0.75]);
         assert_eq!((s.cell, s.pdf, s.uv), ([0, 0], 1.0, [0.25, 0.75]));
@@ -704,32 +666,18 @@ mod tests {
         assert!(hier_iid > 0.5 * alias_iid, "{hier_iid} vs {alias_iid}");
     }
 
-    #[test]
-    fn is_send_and_sync() {
-        fn check<T: Send + Sync>() {}
-        check::<Hierarchical2D>();
-    }
-
     /// Per-sample cost against the inversion sampler on random grids of 4096×2048
     /// (out of cache) and 64×32 (in cache), with ξ from `xi_2d` (no coherence).
     /// Run: `cargo test --release -p envlight --lib hierarchical::tests::timing -- --ignored --nocapture`.
     #[test]
     #[ignore]
     fn timing_against_inversion() {
-        for (nu, nv) in [(4096, 2048), (64, 32)] {
-            let mut rng = SplitMix64::new(1);
-            let f = test_support::random_grid(&mut rng, nu * nv, 0.0);
+        for (nu, nv, f) in test_support::timing_grids() {
             let start = std::time::Instant::now();
             let h = Hierarchical2D::new(&f, nu);
             let build = start.elapsed();
             let inversion = Distribution2D::new(&f, nu);
-            let xi: Vec<[f32; 2]> = (0..2_000_000).map(|k| xi_2d(2, k)).collect();
-            let time = |name: &str, run: &dyn Fn([f32; 2]) -> f32| {
-                test_support::time_per_call(&format!("{nu}x{nv} {name}"), &xi, run)
-            };
-            time("inversion sample", &|x| {
-                inversion.sample_continuous(x).uv[0]
-            });
+            let time = test_support::timer_against_inversion(format!("{nu}x{nv}"), &inversion);
             time("hierarchical sample", &|x| h.sample_continuous(x).uv[0]);
             time("inversion invert", &|x| inversion.invert(x)[0]);
             time("hierarchical invert", &|x| h.invert(x)[0]);
