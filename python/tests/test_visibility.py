@@ -167,5 +167,5 @@ def test_bad_inputs_are_value_errors(light, cache):
     with pytest.raises(ValueError, match="learned_share"):
         envlight.VisibilityCache(light, points, normals, window_room, learned_share=1.0)
     p, nrm = at(4)
-    with pytest.raises(ValueError, match="u must have one row per point"):
+    with pytest.raises(ValueError, match="points and u must have the same length"):
         cache.sample(p, nrm, np.zeros((3, 2), np.float32))

@@ -34,16 +34,7 @@ fn pfm_dir() -> (TempDir, PathBuf) {
 
 /// `shared/envmaps` beside the workspace, when it is there.
 fn envmaps() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipped: {} not found (the real maps are optional)",
-            dir.display()
-        );
-        None
-    }
+    envlight_verify::maps::shared_envmaps()
 }
 
 /// The names of the entries of `dir` (to see that no temporary file was left).

@@ -130,6 +130,17 @@ fn choose<T: NamedOption>(keyword: &'static str, value: &str) -> PyResult<T> {
     })
 }
 
+/// `ValueError` unless the arrays `a` and `b` have the same number of rows.
+fn same_length(a: &str, a_rows: usize, b: &str, b_rows: usize) -> PyResult<()> {
+    if a_rows == b_rows {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!(
+            "{a} and {b} must have the same length, not {a_rows} and {b_rows}"
+        )))
+    }
+}
+
 /// The Python exception for a library error.
 fn to_py_err(e: envlight::Error) -> PyErr {
     match &e {
@@ -757,13 +768,7 @@ impl PyEnvironmentLight {
         let xi = as_arrays::<2>(&u);
         let values = rows::<3>(&points, "points")?;
         let points = self::directions(&values, self.frame);
-        if points.len() != xi.len() {
-            return Err(PyValueError::new_err(format!(
-                "points and u must have the same length, not {} and {}",
-                points.len(),
-                xi.len()
-            )));
-        }
+        same_length("points", points.len(), "u", xi.len())?;
         let light = self.portal_light(py, portals)?;
         self.draw(py, xi.len(), |range, out| {
             light.sample_batch(&points[range.clone()], &xi[range], out)

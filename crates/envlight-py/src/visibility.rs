@@ -1,7 +1,7 @@
 //! `envlight.VisibilityCache`: the library's visibility cache (docs/design.md §10)
 //! over numpy arrays, learning through a Python callable that traces rays.
 
-use crate::{directions, rows, to_py_err, Frame, PyEnvironmentLight};
+use crate::{directions, rows, same_length, to_py_err, Frame, PyEnvironmentLight};
 use envlight::visibility::{VisibilityError, VisibilityOptions};
 use envlight::{Factor, Vec3, VisibilityCache};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
@@ -28,18 +28,16 @@ fn points_and_normals(
     let points = rows::<3>(points, "points")?;
     let normals = rows::<3>(normals, "normals")?;
     let (points, normals) = (directions(&points, frame), directions(&normals, frame));
-    if points.len() != normals.len() {
-        return Err(PyValueError::new_err(format!(
-            "points and normals must have the same length, not {} and {}",
-            points.len(),
-            normals.len()
-        )));
-    }
+    same_length("points", points.len(), "normals", normals.len())?;
     Ok((points.into_owned(), normals.into_owned()))
 }
 
 /// `vectors` (z-up) as an `(N, 3)` float32 array in `frame`.
-fn array3<'py>(py: Python<'py>, vectors: &[Vec3], frame: Frame) -> PyResult<Bound<'py, PyArray2<f32>>> {
+fn array3<'py>(
+    py: Python<'py>,
+    vectors: &[Vec3],
+    frame: Frame,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let flat: Vec<f32> = vectors
         .iter()
         .flat_map(|&v| frame.z_up_to_frame(v).to_array())
@@ -53,6 +51,24 @@ fn build_error(e: VisibilityError<PyErr>) -> PyErr {
     match e {
         VisibilityError::Trace(e) => e,
         other => PyValueError::new_err(other.to_string()),
+    }
+}
+
+impl PyVisibilityCache {
+    /// The shading points (z-up) and a `(N, K)` array of one row per point, as
+    /// given (`what` names it in errors).
+    #[allow(clippy::type_complexity)]
+    fn at_points<const K: usize>(
+        &self,
+        points: &PyReadonlyArray2<'_, f32>,
+        normals: &PyReadonlyArray2<'_, f32>,
+        values: &PyReadonlyArray2<'_, f32>,
+        what: &str,
+    ) -> PyResult<(Vec<Vec3>, Vec<Vec3>, Vec<f32>)> {
+        let (points, normals) = points_and_normals(points, normals, self.frame)?;
+        let values = rows::<K>(values, what)?;
+        same_length("points", points.len(), what, values.len() / K)?;
+        Ok((points, normals, values.into_owned()))
     }
 }
 
@@ -98,7 +114,8 @@ impl PyVisibilityCache {
         let (points, normals) = points_and_normals(&points, &normals, frame)?;
         let numpy = py.import("numpy")?;
         let call = |origins: &[Vec3], directions: &[Vec3], out: &mut [f32]| -> PyResult<()> {
-            let result = trace.call1((array3(py, origins, frame)?, array3(py, directions, frame)?))?;
+            let result =
+                trace.call1((array3(py, origins, frame)?, array3(py, directions, frame)?))?;
             let shape_error = || {
                 PyValueError::new_err(format!(
                     "trace must return an array of shape ({},) of numbers, not {}",
@@ -109,7 +126,7 @@ impl PyVisibilityCache {
             // Any numeric array (bool, float64) is taken as float32.
             let t: PyReadonlyArray1<'_, f32> = numpy
                 .call_method1("asarray", (&result, "float32"))
-                .and_then(|a| a.extract().map_err(PyErr::from))
+                .and_then(|a| a.extract())
                 .map_err(|_| shape_error())?;
             let t = t.as_array();
             if t.len() != out.len() {
@@ -129,8 +146,9 @@ impl PyVisibilityCache {
             }
             Ok(())
         };
-        let cache = VisibilityCache::build(light.product().clone(), &points, &normals, &options, call)
-            .map_err(build_error)?;
+        let cache =
+            VisibilityCache::build(light.product().clone(), &points, &normals, &options, call)
+                .map_err(build_error)?;
         Ok(Self { cache, frame })
     }
 
@@ -144,17 +162,8 @@ impl PyVisibilityCache {
         points: PyReadonlyArray2<'py, f32>,
         normals: PyReadonlyArray2<'py, f32>,
         u: PyReadonlyArray2<'py, f32>,
-    ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<f32>>, Bound<'py, PyArray2<f32>>)>
-    {
-        let (points, normals) = points_and_normals(&points, &normals, self.frame)?;
-        let u = rows::<2>(&u, "u")?;
-        if u.len() != 2 * points.len() {
-            return Err(PyValueError::new_err(format!(
-                "u must have one row per point ({}), not {}",
-                points.len(),
-                u.len() / 2
-            )));
-        }
+    ) -> PyResult<crate::Samples<'py>> {
+        let (points, normals, u) = self.at_points::<2>(&points, &normals, &u, "u")?;
         let samples: Vec<Option<envlight::LightSample>> = py.detach(|| {
             (0..points.len())
                 .into_par_iter()
@@ -164,7 +173,10 @@ impl PyVisibilityCache {
                 })
                 .collect()
         });
-        let directions: Vec<Vec3> = samples.iter().map(|s| s.map_or(Vec3::default(), |s| s.direction)).collect();
+        let directions: Vec<Vec3> = samples
+            .iter()
+            .map(|s| s.map_or(Vec3::default(), |s| s.direction))
+            .collect();
         let pdf: Vec<f32> = samples.iter().map(|s| s.map_or(0.0, |s| s.pdf)).collect();
         let radiance: Vec<f32> = samples
             .iter()
@@ -186,20 +198,17 @@ impl PyVisibilityCache {
         normals: PyReadonlyArray2<'py, f32>,
         directions: PyReadonlyArray2<'py, f32>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
-        let (points, normals) = points_and_normals(&points, &normals, self.frame)?;
-        let dirs = rows::<3>(&directions, "directions")?;
+        let (points, normals, dirs) =
+            self.at_points::<3>(&points, &normals, &directions, "directions")?;
         let dirs = crate::directions(&dirs, self.frame);
-        if dirs.len() != points.len() {
-            return Err(PyValueError::new_err(format!(
-                "directions must have one row per point ({}), not {}",
-                points.len(),
-                dirs.len()
-            )));
-        }
         let pdf: Vec<f32> = py.detach(|| {
             (0..points.len())
                 .into_par_iter()
-                .map(|i| self.cache.at(points[i], &Factor::cosine(normals[i])).pdf(dirs[i]))
+                .map(|i| {
+                    self.cache
+                        .at(points[i], &Factor::cosine(normals[i]))
+                        .pdf(dirs[i])
+                })
                 .collect()
         });
         Ok(PyArray1::from_vec(py, pdf))
@@ -208,7 +217,8 @@ impl PyVisibilityCache {
     /// Writes the cache to `path` with `scene_key`, a string saying which scene it
     /// was learned in; `VisibilityCache.load` refuses another key or light.
     fn save(&self, py: Python<'_>, path: PathBuf, scene_key: &str) -> PyResult<()> {
-        py.detach(|| self.cache.save(&path, scene_key)).map_err(to_py_err)
+        py.detach(|| self.cache.save(&path, scene_key))
+            .map_err(to_py_err)
     }
 
     /// Reads a cache saved by `save` for `light` in the scene `scene_key`

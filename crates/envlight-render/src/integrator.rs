@@ -260,10 +260,12 @@ impl<'a> Integrator<'a> {
                 None => self.light.pdf(d),
             },
             (None, Strategy::Uniform) => UNIFORM_SPHERE_PDF,
-            (None, Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility) => match point {
-                Some(p) => p.pdf(d),
-                None => self.light.pdf(d),
-            },
+            (None, Strategy::Product | Strategy::MisProduct | Strategy::MisVisibility) => {
+                match point {
+                    Some(p) => p.pdf(d),
+                    None => self.light.pdf(d),
+                }
+            }
             (None, _) => 0.0,
         }
     }

@@ -91,14 +91,7 @@ fn direct_light_through_the_openings_matches_the_closed_form() {
 fn strategies_agree_on_the_room() {
     let light = EnvironmentLight::new(builtin::sky(64, 32), LightOptions::default()).unwrap();
     let scene = Scene::builtin("room").unwrap();
-    let settings = RenderSettings {
-        width: 32,
-        height: 18,
-        spp: 48,
-        max_depth: 4,
-        seed: 8,
-        ..Default::default()
-    };
+    let settings = common::small_render(32, 18, 48, 4, 8);
     let strategies = [
         Strategy::Mis,
         Strategy::Light,

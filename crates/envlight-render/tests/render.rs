@@ -75,15 +75,7 @@ fn same_image_for_any_thread_count() {
 fn time_budget_render_equals_sample_count_render() {
     let light = sky_light();
     let scene = Scene::builtin("balls").unwrap();
-    let settings = RenderSettings {
-        width: 24,
-        height: 16,
-        spp: 5,
-        max_depth: 4,
-        strategy: Strategy::Mis,
-        seed: 1,
-        ..Default::default()
-    };
+    let settings = common::small_render(24, 16, 5, 4, 1);
     // A long budget stops at the cap of 5 samples; no budget at all still takes one.
     let timed = render_for_time(&scene, &light, &settings, 60.0, &NoProgress);
     assert_eq!(timed.spp, 5);
@@ -100,14 +92,7 @@ fn time_budget_render_equals_sample_count_render() {
 fn strategies_agree_on_balls() {
     let light = soft_light();
     let scene = Scene::builtin("balls").unwrap();
-    let settings = RenderSettings {
-        width: 48,
-        height: 27,
-        spp: 96,
-        max_depth: 6,
-        seed: 5,
-        ..Default::default()
-    };
+    let settings = common::small_render(48, 27, 96, 6, 5);
     common::strategies_agree_with_mis(&scene, &light, &Strategy::ALL, &settings);
 }
 

@@ -113,3 +113,19 @@ pub fn box_filter(image: &EnvImage, f: usize) -> EnvImage {
         sum.map(|s| (s / (f * f) as f64) as f32)
     })
 }
+
+/// The folder of real maps, `shared/envmaps` beside the repository's workspace,
+/// when it is there; `None`, saying so on stdout, when it is not (the real maps
+/// are optional: tests over them skip).
+pub fn shared_envmaps() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!(
+            "skipped: {} not found (the real maps are optional)",
+            dir.display()
+        );
+        None
+    }
+}

@@ -318,19 +318,14 @@ fn hdr_seeds() -> Vec<Seed> {
     const FORMAT: &str = "FORMAT=32-bit_rle_rgbe";
     let rle = |_| Scanline::Rle;
     let flat = |_| Scanline::Flat;
+    // A seed with the signature and the usual format line.
+    let std_seed = |name, resolution, size, coding: fn(usize) -> Scanline| {
+        (name, hdr_file(SIG, &[FORMAT], resolution, size, coding))
+    };
     vec![
-        (
-            "flat-4x2.hdr",
-            hdr_file(SIG, &[FORMAT], "-Y 2 +X 4", (2, 4), flat),
-        ),
-        (
-            "flat-16x8.hdr",
-            hdr_file(SIG, &[FORMAT], "-Y 8 +X 16", (8, 16), flat),
-        ),
-        (
-            "rle-16x8.hdr",
-            hdr_file(SIG, &[FORMAT], "-Y 8 +X 16", (8, 16), rle),
-        ),
+        std_seed("flat-4x2.hdr", "-Y 2 +X 4", (2, 4), flat),
+        std_seed("flat-16x8.hdr", "-Y 8 +X 16", (8, 16), flat),
+        std_seed("rle-16x8.hdr", "-Y 8 +X 16", (8, 16), rle),
         (
             "old-rle-16x4.hdr",
             hdr_file(SIG, &[FORMAT], "-Y 4 +X 16", (4, 16), |_| Scanline::OldRle),
@@ -346,14 +341,8 @@ fn hdr_seeds() -> Vec<Seed> {
             "no-format-line-8x4.hdr",
             hdr_file(SIG, &[], "-Y 4 +X 8", (4, 8), rle),
         ),
-        (
-            "bottom-up-8x4.hdr",
-            hdr_file(SIG, &[FORMAT], "+Y 4 +X 8", (4, 8), rle),
-        ),
-        (
-            "mirrored-8x4.hdr",
-            hdr_file(SIG, &[FORMAT], "-Y 4 -X 8", (4, 8), rle),
-        ),
+        std_seed("bottom-up-8x4.hdr", "+Y 4 +X 8", (4, 8), rle),
+        std_seed("mirrored-8x4.hdr", "-Y 4 -X 8", (4, 8), rle),
         (
             // Scanlines are columns: 4 of 8 texels, an image 4 wide and 8 high.
             "columns-4x8.hdr",

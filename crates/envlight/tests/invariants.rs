@@ -66,18 +66,22 @@ fn combo(
     mapping: Mapping,
     degrees: f32,
 ) -> EnvironmentLight {
-    EnvironmentLight::new(
-        image,
-        LightOptions {
-            lookup,
-            sampler,
-            density,
-            mapping,
-            rotation: Rotation::about_z_degrees(degrees),
-            ..Default::default()
-        },
-    )
-    .unwrap()
+    let options = LightOptions {
+        rotation: Rotation::about_z_degrees(degrees),
+        ..options(lookup, sampler, density, mapping)
+    };
+    EnvironmentLight::new(image, options).unwrap()
+}
+
+/// The options of that lookup, sampler, density and mapping, the rest default.
+fn options(lookup: Lookup, sampler: Sampler, density: Density, mapping: Mapping) -> LightOptions {
+    LightOptions {
+        lookup,
+        sampler,
+        density,
+        mapping,
+        ..Default::default()
+    }
 }
 
 use envlight::light::{Density, Mapping, Sampler};
@@ -194,17 +198,16 @@ fn table(
     sampler: Sampler,
     table_width: usize,
 ) -> EnvironmentLight {
-    EnvironmentLight::new(
-        image,
-        LightOptions {
+    let options = LightOptions {
+        table_width: Some(table_width),
+        ..options(
             lookup,
             sampler,
-            table_width: Some(table_width),
-            density: Density::PiecewiseConstant,
-            ..Default::default()
-        },
-    )
-    .unwrap()
+            Density::PiecewiseConstant,
+            Mapping::default(),
+        )
+    };
+    EnvironmentLight::new(image, options).unwrap()
 }
 
 /// One `#[test]` per all-black map: no sample, pdf 0, ∫p = 0, no NaN (200k ξ).

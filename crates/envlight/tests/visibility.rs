@@ -103,6 +103,17 @@ const UP: Vec3 = Vec3::new(0.0, 0.0, 1.0);
 const WALL: Vec3 = Vec3::new(-1.0, 0.3, 1.1);
 const EAST: Vec3 = Vec3::new(1.0, 0.0, 0.0);
 
+/// The harness at a floor point (normal up) and a wall point (normal +x), both
+/// with an entry that learned something.
+fn assert_invariants_on_floor_and_wall(cache: &VisibilityCache) {
+    for (case, position, normal) in [("floor", FLOOR, UP), ("wall", WALL, EAST)] {
+        let factor = Factor::cosine(normal);
+        let s = AtVisibilityPoint::new(cache, position, factor, VisibilityVariant::Exact);
+        assert!(s.learned_share() > 0.0, "{case}: no learned share");
+        verify::assert_invariants(case, &s, &s.integrand(), &Config::SYNTHETIC);
+    }
+}
+
 #[test]
 fn the_cache_in_a_room_passes_the_harness() {
     let cache = room_cache(Room { roof: false }, &VisibilityOptions::default());
@@ -112,16 +123,7 @@ fn the_cache_in_a_room_passes_the_harness() {
         summary.entries > 0 && summary.mean_visibility < 0.5,
         "{summary:?}"
     );
-    for (case, position, normal) in [("floor", FLOOR, UP), ("wall", WALL, EAST)] {
-        let s = AtVisibilityPoint::new(
-            &cache,
-            position,
-            Factor::cosine(normal),
-            VisibilityVariant::Exact,
-        );
-        assert!(s.learned_share() > 0.0, "{case}: no entry");
-        verify::assert_invariants(case, &s, &s.integrand(), &Config::SYNTHETIC);
-    }
+    assert_invariants_on_floor_and_wall(&cache);
 }
 
 #[test]
@@ -219,28 +221,20 @@ fn the_callbacks_errors_and_bad_points_are_reported() {
         );
         assert!(e.to_string().contains("ray 7"), "{e}");
     }
+    let refused = |points: &[Vec3], normals: &[Vec3]| {
+        let trace = Room { roof: false }.trace();
+        VisibilityCache::build(product.clone(), points, normals, &options, trace)
+            .unwrap_err()
+            .to_string()
+    };
     let mut bad_points = points.clone();
     bad_points[5].y = f32::INFINITY;
-    let e = VisibilityCache::build(
-        product.clone(),
-        &bad_points,
-        &normals,
-        &options,
-        Room { roof: false }.trace(),
-    )
-    .unwrap_err();
-    assert!(e.to_string().starts_with("point 5:"), "{e}");
+    let e = refused(&bad_points, &normals);
+    assert!(e.starts_with("point 5:"), "{e}");
     let mut bad_normals = normals.clone();
     bad_normals[9] = Vec3::new(0.0, 0.0, 0.0);
-    let e = VisibilityCache::build(
-        product,
-        &points,
-        &bad_normals,
-        &options,
-        Room { roof: false }.trace(),
-    )
-    .unwrap_err();
-    assert!(e.to_string().starts_with("point 9:"), "{e}");
+    let e = refused(&points, &bad_normals);
+    assert!(e.starts_with("point 9:"), "{e}");
 }
 
 /// The variance of `L_Y · cos⁺ · V / p` over `n` samples at `(position, normal)`,
@@ -402,19 +396,10 @@ fn a_damaged_cache_file_is_an_error_never_a_panic() {
 
 #[test]
 fn a_rotated_small_map_in_the_room_passes_the_harness() {
-    // One patch per cell of a 64 × 32 map turned 30° about z: the cache's
+    // About one patch per cell of a 64 × 32 map turned 30° about z: the cache's
     // patches, bounds and directions all go through the light's rotation.
-    let image = envlight::EnvImage::from_fn(64, 32, |x, y| {
-        let (u, v) = ((x as f32 + 0.5) / 64.0, (y as f32 + 0.5) / 32.0);
-        if (0.55..0.62).contains(&u) && (0.3..0.4).contains(&v) {
-            [20.0, 18.0, 14.0]
-        } else if v < 0.5 {
-            [0.5, 0.6, 0.9]
-        } else {
-            [0.2, 0.18, 0.15]
-        }
-    })
-    .unwrap();
+    // A hot block on a random 64 × 32 map (envlight-verify's synthetic maps).
+    let image = envlight_verify::maps::hot(64, 32, 37, 11);
     let options = LightOptions {
         rotation: envlight::Rotation::about_z_degrees(30.0),
         ..Default::default()
@@ -433,13 +418,5 @@ fn a_rotated_small_map_in_the_room_passes_the_harness() {
         Room { roof: true }.trace(),
     )
     .unwrap();
-    for (case, position, normal) in [("floor", FLOOR, UP), ("wall", WALL, EAST)] {
-        let s = AtVisibilityPoint::new(
-            &cache,
-            position,
-            Factor::cosine(normal),
-            VisibilityVariant::Exact,
-        );
-        verify::assert_invariants(case, &s, &s.integrand(), &Config::SYNTHETIC);
-    }
+    assert_invariants_on_floor_and_wall(&cache);
 }

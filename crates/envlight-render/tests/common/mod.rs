@@ -9,6 +9,25 @@ use envlight_render::{
     render, render_with_error, Image, NoProgress, RenderSettings, Scene, Strategy,
 };
 
+/// A small render of `width × height` pixels at `spp` samples, paths of at most
+/// `max_depth` vertices, seed `seed`, with `mis` (the tests' usual settings).
+pub fn small_render(
+    width: usize,
+    height: usize,
+    spp: u32,
+    max_depth: u32,
+    seed: u64,
+) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        spp,
+        max_depth,
+        seed,
+        ..Default::default()
+    }
+}
+
 /// A unit direction at polar angle `theta_deg` from +z, in the xz plane.
 pub fn polar(theta_deg: f32) -> Vec3 {
     let t = theta_deg.to_radians();

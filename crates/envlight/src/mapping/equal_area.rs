@@ -59,22 +59,14 @@ pub const EQUAL_AREA_JACOBIAN: f32 = 4.0 * PI;
 /// formula and the orientation.
 #[inline]
 pub fn square_to_sphere(u: f32, v: f32) -> Vec3 {
-    let a = 2.0 * unit(u) - 1.0;
-    let b = 2.0 * unit(v) - 1.0;
-    let (abs_a, abs_b) = (a.abs(), b.abs());
-    let sum = abs_a + abs_b;
-    let upper = sum <= 1.0;
-    // Computed directly in each half (rather than as 1 - |1 - sum|) so no bits are
-    // lost near the poles.
-    let r = if upper { sum } else { 2.0 - sum };
-    let phi = if r > 0.0 {
-        FRAC_PI_2 * 0.5 * ((abs_b - abs_a) / r + 1.0)
-    } else {
-        0.0
-    };
-    let r2 = r * r;
-    let z = if upper { 1.0 - r2 } else { r2 - 1.0 };
-    let sin_theta = r * (2.0 - r2).max(0.0).sqrt();
+    let Polar {
+        a,
+        b,
+        quarter,
+        z,
+        sin_theta,
+    } = Polar::of(u, v);
+    let phi = FRAC_PI_2 * quarter;
     let (sin_phi, cos_phi) = phi.clamp(0.0, FRAC_PI_2).sin_cos();
     Vec3::new(
         (cos_phi * sin_theta).copysign(a),
@@ -205,22 +197,16 @@ pub fn resample_equirect(src: &EnvImage, size: usize, lookup: Lookup) -> EnvImag
 /// the signs of `a = 2u - 1`, `b = 2v - 1` (no sine or cosine needed).
 #[inline]
 fn square_to_equirect(u: f32, v: f32) -> [f32; 2] {
-    let a = 2.0 * unit(u) - 1.0;
-    let b = 2.0 * unit(v) - 1.0;
-    let (abs_a, abs_b) = (a.abs(), b.abs());
-    let sum = abs_a + abs_b;
-    let upper = sum <= 1.0;
-    let r = if upper { sum } else { 2.0 - sum };
-    let r2 = r * r;
-    let z = if upper { 1.0 - r2 } else { r2 - 1.0 };
-    let sin_theta = r * (2.0 - r2).max(0.0).sqrt();
+    let Polar {
+        a,
+        b,
+        quarter,
+        z,
+        sin_theta,
+    } = Polar::of(u, v);
     let theta = sin_theta.atan2(z);
     // φ within the quadrant as a fraction of a quarter turn, then the quadrant.
-    let quarter = if r > 0.0 {
-        (0.5 * ((abs_b - abs_a) / r + 1.0)).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let quarter = quarter.clamp(0.0, 1.0);
     let turns = match (a < 0.0, b < 0.0) {
         (false, false) => quarter,
         (true, false) => 2.0 - quarter,
@@ -230,6 +216,46 @@ fn square_to_equirect(u: f32, v: f32) -> [f32; 2] {
     // φ = 2π exactly (b = -0 side of the +x meridian) is the seam: wrap to 0.
     let eq_u = if turns >= 1.0 { 0.0 } else { turns };
     [eq_u, (theta * (1.0 / PI)).clamp(0.0, 1.0)]
+}
+
+/// A square point's place on the sphere before any sine or cosine: `a = 2u - 1`,
+/// `b = 2v - 1`, `φ` within its quadrant as a fraction of a quarter turn (from
+/// the radius `r` of its diamond), `z = cos θ` and `sin θ`.
+struct Polar {
+    a: f32,
+    b: f32,
+    quarter: f32,
+    z: f32,
+    sin_theta: f32,
+}
+
+impl Polar {
+    #[inline(always)]
+    fn of(u: f32, v: f32) -> Self {
+        let a = 2.0 * unit(u) - 1.0;
+        let b = 2.0 * unit(v) - 1.0;
+        let (abs_a, abs_b) = (a.abs(), b.abs());
+        let sum = abs_a + abs_b;
+        let upper = sum <= 1.0;
+        // Computed directly in each half (rather than as 1 - |1 - sum|) so no
+        // bits are lost near the poles.
+        let r = if upper { sum } else { 2.0 - sum };
+        let quarter = if r > 0.0 {
+            0.5 * ((abs_b - abs_a) / r + 1.0)
+        } else {
+            0.0
+        };
+        let r2 = r * r;
+        let z = if upper { 1.0 - r2 } else { r2 - 1.0 };
+        let sin_theta = r * (2.0 - r2).max(0.0).sqrt();
+        Self {
+            a,
+            b,
+            quarter,
+            z,
+            sin_theta,
+        }
+    }
 }
 
 /// `x` clamped into `[0, 1]`; NaN gives 0.

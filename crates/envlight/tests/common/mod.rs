@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use envlight::light::{Density, Sampler};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Every sampler with every density it takes (the piecewise-bilinear density is
 /// sampled by inversion only).
@@ -17,14 +17,5 @@ pub const SAMPLER_DENSITIES: [(Sampler, Density); 4] = [
 /// `shared/envmaps` beside the workspace, when it is there (the real maps are
 /// optional: the tests over them skip, saying so, when it is not).
 pub fn envmaps() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/envmaps");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "skipped: {} not found (the real maps are optional)",
-            dir.display()
-        );
-        None
-    }
+    envlight_verify::maps::shared_envmaps()
 }
