@@ -57,7 +57,7 @@ impl From<envlight::Error> for Failure {
             E::NonFiniteTexel { .. } | E::TooLarge { .. } | E::InvalidDimensions { .. } => {
                 ENVLIGHT_ERROR_INVALID_IMAGE
             }
-            E::InvalidOption(_) | E::LightOption(_) => ENVLIGHT_ERROR_INVALID_ARGUMENT,
+            E::InvalidOption(_) | E::LightOption { .. } => ENVLIGHT_ERROR_INVALID_ARGUMENT,
             E::Unsupported(_) | E::HalfOverflow { .. } => ENVLIGHT_ERROR_UNSUPPORTED,
             _ => ENVLIGHT_ERROR_INTERNAL,
         };

@@ -89,9 +89,16 @@ pub enum Error {
     #[error("invalid option: {0}")]
     InvalidOption(String),
     /// Light options that no light can be built with, whatever the image
-    /// ([`crate::light::LightOptions::validate`]); the error names the field.
-    #[error("invalid option: {0}")]
-    LightOption(crate::light::OptionError),
+    /// ([`crate::light::LightOptions::validate`], whose
+    /// [`crate::light::OptionError`] this carries as the field at fault and its
+    /// message).
+    #[error("invalid option: {message}")]
+    LightOption {
+        /// The [`crate::light::LightOptions`] field at fault.
+        field: &'static str,
+        /// The rule it breaks.
+        message: String,
+    },
     /// A combination of options that a feature does not implement (the hierarchical
     /// sampler exported for a GPU, say).
     #[error("not supported: {0}")]
@@ -120,13 +127,6 @@ pub enum Error {
     },
 }
 
-// By hand rather than `#[from]`, which would also make the option error the
-// source: a front end printing the chain would then print its message twice.
-impl From<crate::light::OptionError> for Error {
-    fn from(e: crate::light::OptionError) -> Self {
-        Error::LightOption(e)
-    }
-}
 
 /// Shorthand for results in this crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -58,6 +58,7 @@ mod interop;
 pub mod light;
 pub mod load;
 pub mod mapping;
+mod parallel;
 pub mod math;
 pub mod portal;
 pub mod product;
@@ -78,15 +79,6 @@ pub use math::{Rotation, Vec3};
 pub use product::{Factor, ProductOptions, ProductSampler, ShadingPoint};
 pub use sun::{Sun, SunExtraction, SunOptions};
 pub use visibility::{VisibilityCache, VisibilityOptions, VisibilitySummary};
-
-/// Whether a table built on first use (inside a `OnceLock`: portal sides, glossy
-/// product tables) may be built in parallel here. Not on a rayon worker: a caller's
-/// parallel loop asking for the table would let the waiting worker steal another
-/// job that asks for the same table and block on the `OnceLock` it is itself
-/// initialising (a deadlock). The result is the same either way.
-pub(crate) fn lazy_build_in_parallel() -> bool {
-    rayon::current_thread_index().is_none()
-}
 
 /// The README's Rust example, compiled and run as a doctest so the README stays true.
 /// `repository-README.md` is a link to the repository's README.md, which the

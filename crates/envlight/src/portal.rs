@@ -636,7 +636,7 @@ fn build_side(light: &EnvironmentLight, portal: &Portal, sigma: f64, n: usize) -
             *out = (sum * 0.25) as f32;
         }
     };
-    if crate::lazy_build_in_parallel() {
+    if crate::parallel::lazy_build_in_parallel() {
         f.par_chunks_mut(n).enumerate().for_each(fill_row);
     } else {
         f.chunks_mut(n).enumerate().for_each(fill_row);

@@ -244,6 +244,20 @@ pub enum RadianceFormat {
     F16,
 }
 
+impl RadianceFormat {
+    /// Every format, in declaration order, for option parsers and tests.
+    pub const ALL: [RadianceFormat; 2] = [RadianceFormat::F32, RadianceFormat::F16];
+    /// The name used on the command line and in Python: `"f32"` or `"f16"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RadianceFormat::F32 => "f32",
+            RadianceFormat::F16 => "f16",
+        }
+    }
+}
+
+crate::light::named_option!(RadianceFormat, "radiance");
+
 /// Options of [`EnvironmentLight::gpu_tables`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct GpuTableOptions {

@@ -890,3 +890,17 @@ fn gpu_reference_reader_catches_broken_tables() {
     }
     assert!(mismatches(&flipped, t.tables()) > 100);
 }
+
+/// The radiance formats' names parse back, print as themselves, and an unknown
+/// one is refused with both names (as the light's option enums).
+#[test]
+fn radiance_format_names_round_trip() {
+    use crate::light::NamedOption;
+    for f in RadianceFormat::ALL {
+        assert_eq!(f.name().parse::<RadianceFormat>().unwrap(), f);
+        assert_eq!(f.to_string(), f.name());
+    }
+    let e = "f64".parse::<RadianceFormat>().unwrap_err();
+    assert_eq!(e.accepted, RadianceFormat::names());
+    assert!(e.to_string().contains("f32, f16"), "{e}");
+}

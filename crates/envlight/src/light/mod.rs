@@ -33,6 +33,7 @@ pub(crate) use build::bilinear_nodes;
 pub use build::table_reduction;
 mod efficiency;
 mod options;
+pub(crate) use options::named_option;
 pub use options::{NamedOption, OptionError, UnknownName};
 
 use crate::alias::AliasTable2D;

@@ -1,23 +1,20 @@
 //! The light's option names and their validation, once for every front end.
 //!
 //! Each option enum a front end names ([`Sampler`], [`Density`], [`Mapping`],
-//! [`Lookup`], [`RadianceFormat`]) has `ALL` (every value, in declaration order),
-//! `name()` (the spelling the command line, Python and Mitsuba use), [`FromStr`]
+//! [`Lookup`], and the GPU export's `RadianceFormat`) has `ALL` (every value, in declaration order),
+//! `name()` (the spelling the command line, Python and Mitsuba use), [`FromStr`](std::str::FromStr)
 //! back from that spelling with an [`UnknownName`] error listing the accepted
-//! ones, and [`fmt::Display`] printing the name. [`LightOptions::validate`] holds
+//! ones, and [`Display`](std::fmt::Display) printing the name. [`LightOptions::validate`] holds
 //! every rule about the options alone; [`EnvironmentLight::new`] calls it, and the
 //! front ends call it to refuse bad options before they read a map.
 //!
 //! [`EnvironmentLight::new`]: super::EnvironmentLight::new
 
-use std::fmt;
-use std::str::FromStr;
 
 use super::{Density, LightOptions, Mapping, Sampler};
-use crate::gpu::RadianceFormat;
 use crate::image::Lookup;
 
-/// An option enum whose values have names: what [`FromStr`], [`fmt::Display`]
+/// An option enum whose values have names: what [`FromStr`](std::str::FromStr), [`Display`](std::fmt::Display)
 /// and the front ends' lists of choices are built from.
 pub trait NamedOption: Copy + Sized + 'static {
     /// What the option is called in messages: `"sampler"`, `"lookup"`, ...
@@ -63,10 +60,11 @@ pub struct UnknownName {
 }
 
 /// `FromStr` and `Display` through [`NamedOption`], for a type with inherent
-/// `ALL` and `name()`.
+/// `ALL` and `name()` (the GPU export's `RadianceFormat` takes it too, in
+/// `crate::gpu`, which sits above the light).
 macro_rules! named_option {
     ($ty:ty, $option:literal) => {
-        impl NamedOption for $ty {
+        impl $crate::light::NamedOption for $ty {
             const OPTION: &'static str = $option;
             const VALUES: &'static [Self] = &<$ty>::ALL;
             fn option_name(self) -> &'static str {
@@ -74,15 +72,15 @@ macro_rules! named_option {
             }
         }
 
-        impl FromStr for $ty {
-            type Err = UnknownName;
-            fn from_str(s: &str) -> Result<Self, UnknownName> {
-                <$ty as NamedOption>::from_name(s)
+        impl ::std::str::FromStr for $ty {
+            type Err = $crate::light::UnknownName;
+            fn from_str(s: &str) -> Result<Self, $crate::light::UnknownName> {
+                <$ty as $crate::light::NamedOption>::from_name(s)
             }
         }
 
-        impl fmt::Display for $ty {
-            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        impl ::std::fmt::Display for $ty {
+            fn fmt(&self, f: &mut ::std::fmt::Formatter<'_>) -> ::std::fmt::Result {
                 // `pad`, so that widths and alignment in format strings apply.
                 f.pad(self.name())
             }
@@ -94,7 +92,7 @@ named_option!(Sampler, "sampler");
 named_option!(Density, "density");
 named_option!(Mapping, "mapping");
 named_option!(Lookup, "lookup");
-named_option!(RadianceFormat, "radiance");
+pub(crate) use named_option;
 
 impl Lookup {
     /// Every lookup, in declaration order, for option parsers and tests.
@@ -105,18 +103,6 @@ impl Lookup {
             Lookup::Nearest => "nearest",
             Lookup::Bilinear => "bilinear",
             Lookup::Node => "node",
-        }
-    }
-}
-
-impl RadianceFormat {
-    /// Every format, in declaration order, for option parsers and tests.
-    pub const ALL: [RadianceFormat; 2] = [RadianceFormat::F32, RadianceFormat::F16];
-    /// The name used on the command line and in Python: `"f32"` or `"f16"`.
-    pub fn name(self) -> &'static str {
-        match self {
-            RadianceFormat::F32 => "f32",
-            RadianceFormat::F16 => "f16",
         }
     }
 }
@@ -155,6 +141,18 @@ pub enum OptionError {
     /// `table_width` is `Some(0)`.
     #[error("sampling table width 0: must be at least 1")]
     TableWidth,
+}
+
+// Here rather than in `crate::error`, which sits below the light and names no
+// type of it; the message only, not the option error as the source, so that a
+// front end printing the chain does not print it twice.
+impl From<OptionError> for crate::error::Error {
+    fn from(e: OptionError) -> Self {
+        crate::error::Error::LightOption {
+            field: e.field(),
+            message: e.to_string(),
+        }
+    }
 }
 
 impl OptionError {
@@ -240,6 +238,8 @@ impl LightOptions {
 mod tests {
     use super::*;
     use crate::math::Rotation;
+    use std::fmt;
+    use std::str::FromStr;
 
     fn round_trips<
         T: NamedOption + FromStr<Err = UnknownName> + fmt::Display + PartialEq + fmt::Debug,
@@ -266,7 +266,6 @@ mod tests {
         round_trips::<Density>();
         round_trips::<Mapping>();
         round_trips::<Lookup>();
-        round_trips::<RadianceFormat>();
         assert_eq!(
             "x".parse::<Lookup>().unwrap_err().to_string(),
             "lookup must be one of nearest, bilinear, node, not \"x\""

@@ -1,7 +1,7 @@
-//! The fine level's patches as other samplers in the crate read them: a
-//! [`crate::visibility`] cache weights each patch by what a region of the scene
-//! sees through it, and draws within a patch from the light's own density, as
-//! the product sampler does.
+//! The fine level's patches as other samplers in the crate read them: the
+//! visibility cache (module `visibility`, above this one) weights each patch by
+//! what a region of the scene sees through it, and draws within a patch from the
+//! light's own density, as the product sampler does.
 
 use super::bounds::Direction;
 use super::ProductSampler;

@@ -103,8 +103,8 @@ impl Tables {
                 pick::build(widths, slots);
                 (empty, if empty { 0.0 } else { total })
             };
-        // Lobe tables are built on first use (`crate::lazy_build_in_parallel`).
-        let parallel = crate::lazy_build_in_parallel();
+        // Lobe tables are built on first use (`crate::parallel::lazy_build_in_parallel`).
+        let parallel = crate::parallel::lazy_build_in_parallel();
         let (empty, totals): (Vec<bool>, Vec<f64>) = if parallel {
             slots
                 .par_chunks_mut(patches)
