@@ -127,6 +127,5 @@ pub enum Error {
     },
 }
 
-
 /// Shorthand for results in this crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -10,7 +10,6 @@
 //!
 //! [`EnvironmentLight::new`]: super::EnvironmentLight::new
 
-
 use super::{Density, LightOptions, Mapping, Sampler};
 use crate::image::Lookup;
 
