@@ -7,7 +7,7 @@ use envlight::{EnvironmentLight, Factor, ProductSampler, ShadingPoint, Vec3};
 /// [`ProductSampler`] conditioned on one [`Factor`]: what the checks see of a
 /// renderer's shading point. Its density follows [`Self::integrand`],
 /// `Y(L(ω)) · f(ω)`; within each patch it follows the light's own density over
-/// it reports as its [`Grid`].
+/// it reports as its [`Grid`](crate::Grid).
 pub struct AtShadingPoint<'a> {
     point: ShadingPoint<'a>,
     sampler: &'a ProductSampler,
