@@ -1818,3 +1818,28 @@ fn info_efficiencies_match_a_fine_quadrature() {
         assert!((reported.1 / alone - 1.0).abs() < 0.03, "{v}");
     }
 }
+
+/// A visibility cache option out of range is a usage error before anything is
+/// traced or rendered, not a panic inside the render.
+#[test]
+fn render_refuses_visibility_options_out_of_range() {
+    for (flag, value, needle) in [
+        ("--visibility-share", "1.5", "learned_share 1.5"),
+        ("--visibility-rays", "0", "rays_per_patch 0"),
+        ("--visibility-prior", "-1", "prior -1"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = envlight()
+            .args(["render", "--scene", "balls", "--strategy", "mis-visibility"])
+            .args(["--spp", "1", "--width", "8", "--height", "4"])
+            .arg(format!("{flag}={value}"))
+            .arg("-o")
+            .arg(dir.path().join("out.png"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag}: {stderr}");
+        assert!(stderr.contains(needle), "{flag}: {stderr}");
+        assert!(!dir.path().join("out.png").exists());
+    }
+}

@@ -172,6 +172,10 @@ impl<'a> Integrator<'a> {
     /// the camera's rays through the pixel centres of a `width × height` image,
     /// each ray's transmittance being the scene's own shadow-ray test, and
     /// returns what it holds. `None` (and nothing built) for other strategies.
+    ///
+    /// # Panics
+    /// When `options` do not pass [`VisibilityOptions::validate`] (the scene's
+    /// hits are finite and its tracer answers 0 or 1, so nothing else can fail).
     pub fn learn_visibility(
         &mut self,
         width: usize,
@@ -213,7 +217,7 @@ impl<'a> Integrator<'a> {
         let cache = match VisibilityCache::build(product.clone(), &points, &normals, options, trace)
         {
             Ok(cache) => cache,
-            Err(e) => unreachable!("the scene's hits are finite and its tracer exact: {e}"),
+            Err(e) => panic!("mis-visibility: {e}"),
         };
         let summary = cache.summary();
         self.visibility = Some(cache);

@@ -30,7 +30,8 @@ pub struct RenderSettings {
     /// a measurement asks otherwise).
     pub product: envlight::ProductOptions,
     /// How `mis-visibility` builds its cache (the library's defaults unless a
-    /// measurement asks otherwise).
+    /// measurement asks otherwise); rendering with options that do not pass
+    /// [`envlight::VisibilityOptions::validate`] panics.
     pub visibility: envlight::VisibilityOptions,
 }
 

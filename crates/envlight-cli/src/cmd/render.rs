@@ -272,6 +272,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             }
         },
     };
+    settings
+        .visibility
+        .validate()
+        .map_err(|e| UsageError(format!("--visibility-*: {e}")))?;
     let bars = Bars::new();
 
     if args.compare {

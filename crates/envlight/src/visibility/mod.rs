@@ -268,7 +268,16 @@ impl VisibilityCache {
         };
         VisibilitySummary {
             entries: self.entries.len(),
-            bytes: self.entries.len() * self.entry_bytes() + self.grid.memory_bytes(),
+            bytes: self
+                .entries
+                .iter()
+                .map(|e| {
+                    std::mem::size_of::<Entry>()
+                        + e.patches.memory_bytes()
+                        + std::mem::size_of_val(e.visibility.as_slice())
+                })
+                .sum::<usize>()
+                + self.grid.memory_bytes(),
             radius: self.grid.radius(),
             mean_visibility: mean,
             rays: self.rays,
@@ -369,32 +378,43 @@ impl VisibilityPoint<'_> {
 }
 
 pub(crate) fn check_options<E>(o: &VisibilityOptions) -> Result<(), VisibilityError<E>> {
-    let bad = |what: String| Err(VisibilityError::Option(what));
-    if let Some(r) = o.radius {
-        if !(r > 0.0 && r.is_finite()) {
-            return bad(format!("radius {r}: must be positive and finite"));
+    o.validate().map_err(VisibilityError::Option)
+}
+
+impl VisibilityOptions {
+    /// Checks every option against its range: what [`VisibilityCache::build`]
+    /// refuses, for a front end to refuse before it traces anything.
+    ///
+    /// # Errors
+    /// A message naming the option and its range.
+    pub fn validate(&self) -> Result<(), String> {
+        let o = self;
+        if let Some(r) = o.radius {
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(format!("radius {r}: must be positive and finite"));
+            }
         }
+        if !(1..=16).contains(&o.normal_bins) {
+            return Err(format!("normal_bins {}: must be 1 to 16", o.normal_bins));
+        }
+        if o.target_entries == 0 {
+            return Err("target_entries 0: must be at least 1".into());
+        }
+        if o.rays_per_patch == 0 || o.rays_per_patch > 4096 {
+            return Err(format!(
+                "rays_per_patch {}: must be 1 to 4096",
+                o.rays_per_patch
+            ));
+        }
+        if !(o.learned_share >= 0.0 && o.learned_share < 1.0) {
+            return Err(format!(
+                "learned_share {}: must be in [0, 1)",
+                o.learned_share
+            ));
+        }
+        if !(o.prior > 0.0 && o.prior.is_finite()) {
+            return Err(format!("prior {}: must be positive and finite", o.prior));
+        }
+        Ok(())
     }
-    if !(1..=16).contains(&o.normal_bins) {
-        return bad(format!("normal_bins {}: must be 1 to 16", o.normal_bins));
-    }
-    if o.target_entries == 0 {
-        return bad("target_entries 0: must be at least 1".into());
-    }
-    if o.rays_per_patch == 0 || o.rays_per_patch > 4096 {
-        return bad(format!(
-            "rays_per_patch {}: must be 1 to 4096",
-            o.rays_per_patch
-        ));
-    }
-    if !(o.learned_share >= 0.0 && o.learned_share < 1.0) {
-        return bad(format!(
-            "learned_share {}: must be in [0, 1)",
-            o.learned_share
-        ));
-    }
-    if !(o.prior > 0.0 && o.prior.is_finite()) {
-        return bad(format!("prior {}: must be positive and finite", o.prior));
-    }
-    Ok(())
 }
