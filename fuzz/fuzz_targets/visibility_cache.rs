@@ -5,7 +5,7 @@
 // magic, version, light hash and an empty scene key are given, so the fuzzer
 // spends its time past the keys. The light and patch grid are those the seeds
 // were made with (crates/envlight/examples/fuzz_seeds.rs, `visibility_seeds`).
-use envlight::visibility::light_hash;
+use envlight::visibility::{light_hash, FILE_VERSION};
 use envlight::{
     EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3, VisibilityCache,
 };
@@ -27,7 +27,7 @@ fn product() -> &'static Arc<ProductSampler> {
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let product = product();
     let mut bytes = b"envlvis\0".to_vec();
-    bytes.extend_from_slice(&1u32.to_le_bytes());
+    bytes.extend_from_slice(&FILE_VERSION.to_le_bytes());
     bytes.extend_from_slice(&light_hash(product).to_le_bytes());
     bytes.extend_from_slice(&0u32.to_le_bytes());
     bytes.extend_from_slice(data);

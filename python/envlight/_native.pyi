@@ -242,6 +242,7 @@ class VisibilityCache:
         target_entries: Optional[int] = None,
         memory_budget: Optional[int] = None,
         rays_per_patch: Optional[int] = None,
+        refine_rays: Optional[int] = None,
         learned_share: Optional[float] = None,
         prior: Optional[float] = None,
         seed: Optional[int] = None,

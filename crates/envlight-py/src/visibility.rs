@@ -81,7 +81,7 @@ impl PyVisibilityCache {
     /// Options as the library's `VisibilityOptions`; omitted ones take its
     /// defaults.
     #[new]
-    #[pyo3(signature = (light, points, normals, trace, *, radius=None, normal_bins=None, target_entries=None, memory_budget=None, rays_per_patch=None, learned_share=None, prior=None, seed=None))]
+    #[pyo3(signature = (light, points, normals, trace, *, radius=None, normal_bins=None, target_entries=None, memory_budget=None, rays_per_patch=None, refine_rays=None, learned_share=None, prior=None, seed=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -94,6 +94,7 @@ impl PyVisibilityCache {
         target_entries: Option<usize>,
         memory_budget: Option<usize>,
         rays_per_patch: Option<usize>,
+        refine_rays: Option<usize>,
         learned_share: Option<f32>,
         prior: Option<f32>,
         seed: Option<u64>,
@@ -107,6 +108,7 @@ impl PyVisibilityCache {
             target_entries: target_entries.unwrap_or(d.target_entries),
             memory_budget: memory_budget.unwrap_or(d.memory_budget),
             rays_per_patch: rays_per_patch.unwrap_or(d.rays_per_patch),
+            refine_rays: refine_rays.unwrap_or(d.refine_rays),
             learned_share: learned_share.unwrap_or(d.learned_share),
             prior: prior.unwrap_or(d.prior),
             seed: seed.unwrap_or(d.seed),

@@ -2,7 +2,8 @@
 //! fixed points of a synthetic room lit through one window, against the
 //! unoccluded integrand `Y · cos⁺` (its pdf must cover all of it, whatever the
 //! rays saw); the broken variants rejected; the callback's errors; and the
-//! variance it saves against the product sampler alone.
+//! variance it saves against the product sampler alone, in that room, under
+//! slatted roofs and in the open.
 //!
 //! Statistics as in `tests/product.rs` (`Config::SYNTHETIC`: chi-square at
 //! α = 1e-3 with 1M samples, consistency over 200k samples, unbiasedness at 4
@@ -25,7 +26,23 @@ struct Room {
     roof: bool,
 }
 
-impl Room {
+/// A scene as the cache's callback sees it.
+trait Blocker {
+    /// The transmittance of the ray from `o` along unit `d`: 1 if it reaches the
+    /// sky, else 0.
+    fn transmittance(&self, o: Vec3, d: Vec3) -> f32;
+
+    fn trace(&self) -> impl FnMut(&[Vec3], &[Vec3], &mut [f32]) -> Result<(), String> + '_ {
+        move |o, d, t| {
+            for ((o, d), t) in o.iter().zip(d).zip(t.iter_mut()) {
+                *t = self.transmittance(*o, *d);
+            }
+            Ok(())
+        }
+    }
+}
+
+impl Blocker for Room {
     /// 1 when the ray from `o` (inside the box) along `d` leaves through an
     /// opening, else 0.
     fn transmittance(&self, o: Vec3, d: Vec3) -> f32 {
@@ -56,14 +73,55 @@ impl Room {
         };
         open as u8 as f32
     }
+}
 
-    fn trace(&self) -> impl FnMut(&[Vec3], &[Vec3], &mut [f32]) -> Result<(), String> + '_ {
-        move |o, d, t| {
-            for ((o, d), t) in o.iter().zip(d).zip(t.iter_mut()) {
-                *t = self.transmittance(*o, *d);
-            }
-            Ok(())
+/// A slatted roof over the ground: slats along `y`, `width` wide every
+/// `pitch`, at height 2 over `|x|, |y| < 3`, open on every side; below `z = 0`,
+/// the ground.
+struct Slats {
+    width: f32,
+    pitch: f32,
+}
+
+impl Blocker for Slats {
+    fn transmittance(&self, o: Vec3, d: Vec3) -> f32 {
+        if d.z <= 0.0 {
+            return (d.z == 0.0 && o.z > 0.0) as u8 as f32;
         }
+        let t = (2.0 - o.z) / d.z;
+        let (x, y) = (o.x + d.x * t, o.y + d.y * t);
+        let under = x.abs() < 3.0 && y.abs() < 3.0;
+        let on_slat = (x / self.pitch).rem_euclid(1.0) < self.width / self.pitch;
+        !(under && on_slat) as u8 as f32
+    }
+}
+
+/// The open: the ground, and one box `[1, 2] × [-0.5, 0.5] × [0, 1]` on it.
+struct Open;
+
+impl Blocker for Open {
+    fn transmittance(&self, o: Vec3, d: Vec3) -> f32 {
+        if d.z <= 0.0 {
+            return 0.0;
+        }
+        // The ray against the box's slabs.
+        let (mut near, mut far) = (0.0f32, f32::INFINITY);
+        for (o, d, lo, hi) in [
+            (o.x, d.x, 1.0, 2.0),
+            (o.y, d.y, -0.5, 0.5),
+            (o.z, d.z, 0.0, 1.0),
+        ] {
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return 1.0;
+                }
+                continue;
+            }
+            let (a, b) = ((lo - o) / d, (hi - o) / d);
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+        (near > far) as u8 as f32
     }
 }
 
@@ -240,7 +298,7 @@ fn the_callbacks_errors_and_bad_points_are_reported() {
 /// The variance of `L_Y · cos⁺ · V / p` over `n` samples at `(position, normal)`,
 /// `V` the room's own visibility: the irradiance a renderer estimates there.
 fn irradiance_variance(
-    room: Room,
+    room: &impl Blocker,
     n: u64,
     sample: impl Fn([f32; 2]) -> Option<envlight::LightSample>,
     position: Vec3,
@@ -260,25 +318,110 @@ fn irradiance_variance(
     (mean, sum2 / n as f64 - mean * mean)
 }
 
-#[test]
-fn the_cache_cuts_the_variance_through_a_window() {
-    // Equal samples at a floor point: the window is most of what it sees.
-    let room = Room { roof: false };
-    let cache = room_cache(room, &VisibilityOptions::default());
-    let factor = Factor::cosine(UP);
-    let point = cache.at(FLOOR, &factor);
-    let product = cache.product().at(&factor);
+/// Ground points, normal up, on a `40 × 40` grid over `[-r, r]²`, but for those
+/// `inside`.
+fn ground_points(r: f32, inside: impl Fn(Vec3) -> bool) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut points = Vec::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let (a, b) = ((i as f32 + 0.5) / 20.0 - 1.0, (j as f32 + 0.5) / 20.0 - 1.0);
+            let p = Vec3::new(a * r, b * r, 0.0);
+            if !inside(p) {
+                points.push(p);
+            }
+        }
+    }
+    let normals = vec![UP; points.len()];
+    (points, normals)
+}
+
+/// The cache's irradiance variance over the product sampler's at equal samples,
+/// summed over `at` (each point's own variance: what an image's squared error
+/// adds up), with both means checked against each other at every point.
+fn variance_ratio(
+    name: &str,
+    scene: &impl Blocker,
+    points: &[Vec3],
+    normals: &[Vec3],
+    at: &[(Vec3, Vec3)],
+) -> f64 {
+    let cache = VisibilityCache::build(
+        sky_product(),
+        points,
+        normals,
+        &VisibilityOptions::default(),
+        scene.trace(),
+    )
+    .expect("the cache builds");
     let n = 200_000;
-    let (m_cache, v_cache) = irradiance_variance(room, n, |xi| point.sample(xi), FLOOR, UP);
-    let (m_prod, v_prod) = irradiance_variance(room, n, |xi| product.sample(xi), FLOOR, UP);
-    let ratio = v_cache / v_prod;
-    println!(
-        "irradiance at the floor: cache {m_cache:.5} (var {v_cache:.3e}), product {m_prod:.5} (var {v_prod:.3e}): variance ratio {ratio:.3}"
+    let (mut cache_sum, mut product_sum) = (0.0, 0.0);
+    for &(position, normal) in at {
+        let factor = Factor::cosine(normal);
+        let (point, product) = (cache.at(position, &factor), cache.product().at(&factor));
+        let (m_c, v_c) = irradiance_variance(scene, n, |xi| point.sample(xi), position, normal);
+        let (m_p, v_p) = irradiance_variance(scene, n, |xi| product.sample(xi), position, normal);
+        println!(
+            "{name} at {:?}: share {:.3}, irradiance cache {m_c:.5} product {m_p:.5}, variance ratio {:.3}",
+            position.to_array(),
+            point.learned_share(),
+            v_c / v_p
+        );
+        // Unbiased: both estimate the same irradiance (4 standard errors).
+        let se = ((v_c + v_p) / n as f64).sqrt();
+        assert!((m_c - m_p).abs() < 4.0 * se, "{name}: {m_c} vs {m_p}");
+        cache_sum += v_c;
+        product_sum += v_p;
+    }
+    cache_sum / product_sum
+}
+
+#[test]
+fn the_variance_it_saves_in_a_room_under_slats_and_in_the_open() {
+    // The targets at equal samples: a room lit through one window
+    // ≤ 0.2× the product sampler's variance, a slatted roof ≤ 0.8×, the open
+    // ≤ 1.15× (no harm).
+    let (points, normals) = room_points();
+    let room = variance_ratio(
+        "room",
+        &Room { roof: false },
+        &points,
+        &normals,
+        &[(FLOOR, UP), (Vec3::new(-0.6, 0.5, 0.0), UP), (WALL, EAST)],
     );
-    // Both estimate the same irradiance (4 standard errors of the difference).
-    let se = ((v_cache + v_prod) / n as f64).sqrt();
-    assert!((m_cache - m_prod).abs() < 4.0 * se, "{m_cache} vs {m_prod}");
-    assert!(ratio < 0.5, "variance ratio {ratio}");
+    // Under the slats: the ground from which the built-in sky's sun (towards
+    // (0.41, 0.71, 0.57)) is seen through the roof, on a 3 × 3 grid.
+    let (points, normals) = ground_points(2.5, |_| false);
+    let at: Vec<(Vec3, Vec3)> = (0..9)
+        .map(|i| {
+            let (x, y) = (-2.0 + 1.3 * (i % 3) as f32, -2.0 + 1.1 * (i / 3) as f32);
+            (Vec3::new(x, y, 0.0), UP)
+        })
+        .collect();
+    let beams = Slats {
+        width: 0.5,
+        pitch: 1.0,
+    };
+    let slats = variance_ratio("slats", &beams, &points, &normals, &at);
+    let fine = Slats {
+        width: 0.12,
+        pitch: 0.3,
+    };
+    let fine = variance_ratio("fine slats", &fine, &points, &normals, &at);
+    let (points, normals) = ground_points(3.0, |p| (1.0..=2.0).contains(&p.x) && p.y.abs() <= 0.5);
+    let spots = [
+        Vec3::new(0.8, 0.1, 0.0),
+        Vec3::new(2.3, -0.6, 0.0),
+        Vec3::new(-1.5, 1.5, 0.0),
+    ];
+    let at: Vec<(Vec3, Vec3)> = spots.iter().map(|&p| (p, UP)).collect();
+    let open = variance_ratio("open", &Open, &points, &normals, &at);
+    println!(
+        "variance over the product's: room {room:.3}, slats {slats:.3}, fine slats {fine:.3}, open {open:.3}"
+    );
+    assert!(room <= 0.2, "room: {room}");
+    assert!(slats <= 0.8, "slats: {slats}");
+    assert!(fine <= 1.15, "fine slats: {fine}");
+    assert!(open <= 1.15, "open: {open}");
 }
 
 #[test]

@@ -135,6 +135,11 @@ pub struct RenderArgs {
     #[arg(long, value_name = "N", hide = true)]
     visibility_rays: Option<usize>,
 
+    /// mis-visibility: rays per entry and edge patch in the second pass (for
+    /// measurements).
+    #[arg(long, value_name = "N", hide = true)]
+    visibility_refine: Option<usize>,
+
     /// mis-visibility: the number of entries the cache aims at (for measurements).
     #[arg(long, value_name = "N", hide = true)]
     visibility_entries: Option<usize>,
@@ -266,6 +271,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             envlight::VisibilityOptions {
                 learned_share: args.visibility_share.unwrap_or(d.learned_share),
                 rays_per_patch: args.visibility_rays.unwrap_or(d.rays_per_patch),
+                refine_rays: args.visibility_refine.unwrap_or(d.refine_rays),
                 target_entries: args.visibility_entries.unwrap_or(d.target_entries),
                 prior: args.visibility_prior.unwrap_or(d.prior),
                 ..d

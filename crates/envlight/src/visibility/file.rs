@@ -4,8 +4,9 @@
 //! Layout (little-endian):
 //!
 //! ```text
-//! magic "envlvis\0" | version u32 = 1 | light hash u64 | scene key: u32 length, UTF-8
+//! magic "envlvis\0" | version u32 = 2 | light hash u64 | scene key: u32 length, UTF-8
 //! radius f32 | normal_bins u32 | target_entries u64 | memory_budget u64 | rays_per_patch u32
+//! refine_rays u32
 //! learned_share f32 | prior f32 | seed u64 | patches u32 | rays u64 | entries u32
 //! per entry: key u64 | normal 3 × f32 | cos_spread f32 | visibility patches × f32
 //! ```
@@ -27,7 +28,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 const MAGIC: &[u8; 8] = b"envlvis\0";
-const VERSION: u32 = 1;
+/// The version of the file layout this library writes and reads.
+pub const FILE_VERSION: u32 = 2;
 const FORMAT: &str = "envlight visibility cache";
 /// The longest scene key a file may hold.
 pub const MAX_SCENE_KEY: usize = 1 << 16;
@@ -89,7 +91,7 @@ impl VisibilityCache {
         let patches = self.product.patches_view().count();
         let mut w = Vec::with_capacity(128 + self.entries.len() * (24 + 4 * patches));
         w.extend_from_slice(MAGIC);
-        w.extend_from_slice(&VERSION.to_le_bytes());
+        w.extend_from_slice(&FILE_VERSION.to_le_bytes());
         w.extend_from_slice(&light_hash(&self.product).to_le_bytes());
         w.extend_from_slice(&(scene_key.len() as u32).to_le_bytes());
         w.extend_from_slice(scene_key.as_bytes());
@@ -98,6 +100,7 @@ impl VisibilityCache {
         w.extend_from_slice(&(o.target_entries as u64).to_le_bytes());
         w.extend_from_slice(&(o.memory_budget as u64).to_le_bytes());
         w.extend_from_slice(&(o.rays_per_patch as u32).to_le_bytes());
+        w.extend_from_slice(&(o.refine_rays as u32).to_le_bytes());
         w.extend_from_slice(&o.learned_share.to_le_bytes());
         w.extend_from_slice(&o.prior.to_le_bytes());
         w.extend_from_slice(&o.seed.to_le_bytes());
@@ -153,8 +156,10 @@ impl VisibilityCache {
             return Err(r.bad("not a visibility cache (no envlvis magic)".into()));
         }
         let version = r.u32()?;
-        if version != VERSION {
-            return Err(r.bad(format!("version {version}, this library reads {VERSION}")));
+        if version != FILE_VERSION {
+            return Err(r.bad(format!(
+                "version {version}, this library reads {FILE_VERSION}"
+            )));
         }
         let saved_hash = r.u64()?;
         let key_len = r.u32()? as usize;
@@ -183,6 +188,7 @@ impl VisibilityCache {
             target_entries: r.u64()? as usize,
             memory_budget: r.u64()? as usize,
             rays_per_patch: r.u32()? as usize,
+            refine_rays: r.u32()? as usize,
             learned_share: r.f32()?,
             prior: r.f32()?,
             seed: r.u64()?,

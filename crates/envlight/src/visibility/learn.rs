@@ -6,6 +6,7 @@
 use super::entries::Groups;
 use super::{Entry, VisibilityError, VisibilityOptions};
 use crate::distribution::Distribution1D;
+use crate::mapping::Mapping;
 use crate::math::Vec3;
 use crate::product::patches::Patches;
 use crate::product::ProductSampler;
@@ -72,32 +73,55 @@ pub(crate) fn learn<E>(
         transmittance: vec![0.0; BATCH],
     };
     let mut rays = 0u64;
+    // First pass: a few rays towards every lit patch each entry can face.
     for (e, group) in groups.iter().enumerate() {
         let mut rng = SplitMix64::new(mix64(options.seed ^ mix64(e as u64)));
         for k in 0..count {
-            if pending[e].bound[k] <= 0.0 {
-                continue;
-            }
-            for _ in 0..options.rays_per_patch {
-                let i = group[(rng.next_u64() % group.len() as u64) as usize] as usize;
-                let xi = [rng.next_f64(), rng.next_f64()];
-                let Some((direction, _)) = patches.sample(k, xi) else {
-                    continue;
+            if pending[e].bound[k] > 0.0 {
+                let aim = Aim {
+                    entry: e,
+                    patch: k,
+                    rays: options.rays_per_patch,
                 };
-                // A ray into its own surface says nothing about the sky.
-                if normals[i].dot(direction) <= 0.0 {
-                    continue;
-                }
-                batch.origins.push(points[i]);
-                batch.directions.push(direction);
-                batch.owners.push((e as u32, k as u32));
-                if batch.origins.len() == BATCH {
-                    rays += batch.flush(&mut pending, &mut trace)?;
-                }
+                rays += batch.shoot(
+                    aim,
+                    group,
+                    points,
+                    normals,
+                    &patches,
+                    &mut rng,
+                    &mut pending,
+                    &mut trace,
+                )?;
             }
         }
     }
     rays += batch.flush(&mut pending, &mut trace)?;
+    // Second pass: more rays where the first saw an edge of what the entry sees.
+    if options.refine_rays > 0 {
+        let grid = Neighbours::of(product);
+        for (e, group) in groups.iter().enumerate() {
+            let mut rng = SplitMix64::new(mix64(options.seed ^ mix64(!(e as u64))));
+            for k in pending[e].edges(&grid) {
+                let aim = Aim {
+                    entry: e,
+                    patch: k,
+                    rays: options.refine_rays,
+                };
+                rays += batch.shoot(
+                    aim,
+                    group,
+                    points,
+                    normals,
+                    &patches,
+                    &mut rng,
+                    &mut pending,
+                    &mut trace,
+                )?;
+            }
+        }
+        rays += batch.flush(&mut pending, &mut trace)?;
+    }
 
     let entries = pending
         .into_iter()
@@ -106,7 +130,118 @@ pub(crate) fn learn<E>(
     Ok(Learned { entries, rays })
 }
 
+/// Rays for one entry towards one patch.
+#[derive(Clone, Copy)]
+struct Aim {
+    entry: usize,
+    patch: usize,
+    rays: usize,
+}
+
+/// The fine level's patch grid as neighbours see it: `[Pw, Ph]`, row-major,
+/// and whether its columns wrap around (a lat-long map's seam).
+struct Neighbours {
+    size: [usize; 2],
+    wraps: bool,
+}
+
+impl Neighbours {
+    fn of(product: &ProductSampler) -> Self {
+        Self {
+            size: product.patches(),
+            wraps: product.light().mapping() == Mapping::Equirectangular,
+        }
+    }
+
+    /// The patches sharing a side with patch `k`.
+    fn around(&self, k: usize) -> impl Iterator<Item = usize> {
+        let [w, h] = self.size;
+        let (x, y) = (k % w, k / w);
+        let left = if x > 0 {
+            Some(k - 1)
+        } else {
+            (self.wraps && w > 1).then(|| k + w - 1)
+        };
+        let right = if x + 1 < w {
+            Some(k + 1)
+        } else {
+            (self.wraps && w > 1).then(|| k + 1 - w)
+        };
+        let up = (y > 0).then(|| k - w);
+        let down = (y + 1 < h).then(|| k + w);
+        [left, right, up, down].into_iter().flatten()
+    }
+}
+
+impl Pending {
+    /// Whether the first pass's rays to patch `k` all escaped (`Some(true)`),
+    /// were all blocked (`Some(false)`), or neither, or none was traced (`None`).
+    fn outcome(&self, k: usize) -> Option<bool> {
+        let (s, m) = (self.sum[k], self.count[k]);
+        if m == 0 || self.bound[k] <= 0.0 {
+            None
+        } else if s == 0.0 {
+            Some(false)
+        } else if s == m as f32 {
+            Some(true)
+        } else {
+            None
+        }
+    }
+
+    /// The traced patches on an edge of what the entry sees: a patch whose
+    /// rays disagreed, or whose rays agreed but not with those of a traced
+    /// neighbour. Inside a wall, or inside open sky, no patch is refined.
+    fn edges(&self, grid: &Neighbours) -> Vec<usize> {
+        (0..self.sum.len())
+            .filter(|&k| self.count[k] > 0 && self.bound[k] > 0.0)
+            .filter(|&k| match self.outcome(k) {
+                None => true,
+                Some(mine) => grid.around(k).any(|j| {
+                    self.count[j] > 0 && self.bound[j] > 0.0 && self.outcome(j) != Some(mine)
+                }),
+            })
+            .collect()
+    }
+}
+
 impl Batch {
+    /// Queues `aim.rays` rays from random points of the entry's `group` towards
+    /// directions drawn from the light within the patch, tracing whenever the
+    /// batch fills; returns the rays traced. A ray into its own point's surface
+    /// says nothing about the sky and is not queued.
+    #[allow(clippy::too_many_arguments)]
+    fn shoot<E>(
+        &mut self,
+        aim: Aim,
+        group: &[u32],
+        points: &[Vec3],
+        normals: &[Vec3],
+        patches: &Patches<'_>,
+        rng: &mut SplitMix64,
+        pending: &mut [Pending],
+        trace: &mut impl FnMut(&[Vec3], &[Vec3], &mut [f32]) -> Result<(), E>,
+    ) -> Result<u64, VisibilityError<E>> {
+        let mut traced = 0;
+        for _ in 0..aim.rays {
+            let i = group[(rng.next_u64() % group.len() as u64) as usize] as usize;
+            let xi = [rng.next_f64(), rng.next_f64()];
+            let Some((direction, _)) = patches.sample(aim.patch, xi) else {
+                continue;
+            };
+            if normals[i].dot(direction) <= 0.0 {
+                continue;
+            }
+            self.origins.push(points[i]);
+            self.directions.push(direction);
+            self.owners.push((aim.entry as u32, aim.patch as u32));
+            if self.origins.len() == BATCH {
+                traced += self.flush(pending, trace)?;
+            }
+        }
+        Ok(traced)
+    }
+
     /// Traces the rays waiting and adds their transmittance to their entries.
     fn flush<E>(
         &mut self,

@@ -7,8 +7,11 @@
 //! octahedral grid of normals), and for each entry and each patch of the
 //! [`ProductSampler`]'s fine level that the entry's normals can face, it asks the
 //! callback for the transmittance of a few rays from the entry's points towards
-//! directions drawn from the light within the patch. From those it estimates the
-//! patch's visibility `V̂_e[k] = (Σ t + a) / (m + a)`, `m` the rays that left
+//! directions drawn from the light within the patch; then, in a second pass, for
+//! many more rays towards the patches on an *edge* of what the first pass saw (a
+//! patch whose rays disagreed, or agreed otherwise than a neighbour's): a window's
+//! rim, a roof's eave, the horizon of a wall. Inside a wall or open sky no ray
+//! is spent twice. From those it estimates the patch's visibility `V̂_e[k] = (Σ t + a) / (m + a)`, `m` the rays that left
 //! their point's upper hemisphere and `a` a small prior count of unoccluded rays,
 //! so `V̂ ∈ (0, 1]`: never 0.
 //!
@@ -47,7 +50,7 @@ mod entries;
 mod file;
 mod learn;
 
-pub use file::{light_hash, MAX_SCENE_KEY};
+pub use file::{light_hash, FILE_VERSION, MAX_SCENE_KEY};
 
 use crate::distribution::Distribution1D;
 use crate::light::{solid_angle_density, LightSample};
@@ -70,8 +73,12 @@ pub struct VisibilityOptions {
     pub target_entries: usize,
     /// Bytes the entries' tables may take; the radius grows until they fit.
     pub memory_budget: usize,
-    /// Rays per entry and lit patch it can face.
+    /// Rays per entry and lit patch it can face, in the first pass.
     pub rays_per_patch: usize,
+    /// Rays per entry and patch in the second pass, towards the patches on an
+    /// edge of what the first pass saw (a patch whose rays disagreed, or whose
+    /// rays disagreed with a neighbour's); 0 for no second pass.
+    pub refine_rays: usize,
     /// `α`: the learned distribution's largest share of the mixture, in
     /// `[0, 1)`. An entry's share is `α (1 − V̄_e)`, `V̄_e` the share of the
     /// light it faces that it sees (module docs): the product sampler alone
@@ -93,8 +100,9 @@ impl Default for VisibilityOptions {
             target_entries: 512,
             memory_budget: 64 << 20,
             rays_per_patch: 4,
+            refine_rays: 16,
             learned_share: 0.9,
-            prior: 0.1,
+            prior: 0.02,
             seed: 0x5eed_5c7e,
         }
     }
@@ -405,6 +413,9 @@ impl VisibilityOptions {
                 "rays_per_patch {}: must be 1 to 4096",
                 o.rays_per_patch
             ));
+        }
+        if o.refine_rays > 4096 {
+            return Err(format!("refine_rays {}: must be 0 to 4096", o.refine_rays));
         }
         if !(o.learned_share >= 0.0 && o.learned_share < 1.0) {
             return Err(format!(
