@@ -11,7 +11,8 @@
 //! at 320 × 180 (the camera's first hits through the pixel centres, the scene's
 //! shadow rays as the callback), with the library's default options unless
 //! `ENVLIGHT_VIS=key=value,...` overrides them (`share`, `rays`, `refine`, `prior`,
-//! `entries`, `bins`). `POINTS` first hits (default 200) are drawn at random
+//! `entries`, `bins`), and `ENVLIGHT_PATCHES=WxH` sets the product sampler's
+//! patch grid. `POINTS` first hits (default 200) are drawn at random
 //! pixels; at each, `SAMPLES` (default 2000) one-sample estimates
 //! `L cos⁺ V / p` of the irradiance are taken with each sampler. Prints the
 //! variance summed over the diffuse points, each weighted by its albedo's
@@ -55,10 +56,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let samples: usize = args.get(3).map_or(Ok(2000), |s| s.parse())?;
     let options = options_from_env()?;
 
-    let product = Arc::new(ProductSampler::new(
-        light.clone(),
-        ProductOptions::default(),
-    ));
+    let patches = std::env::var("ENVLIGHT_PATCHES").ok().map(|v| {
+        let (a, b) = v.split_once('x').expect("ENVLIGHT_PATCHES=WxH");
+        [a.parse().expect("a width"), b.parse().expect("a height")]
+    });
+    let product_options = ProductOptions {
+        patches,
+        ..ProductOptions::default()
+    };
+    let product = Arc::new(ProductSampler::new(light.clone(), product_options));
     let (w, h) = (320usize, 180usize);
     let hits: Vec<(Vec3, Vec3)> = (0..w * h)
         .filter_map(|i| first_hit(&scene, (i % w) as f32 + 0.5, (i / w) as f32 + 0.5, w, h))

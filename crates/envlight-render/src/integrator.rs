@@ -6,10 +6,10 @@ use crate::geometry::{Frame, Ray};
 use crate::rgb::{add, is_black, max_component, mul, scale, Rgb};
 use crate::scene::Scene;
 use crate::strategy::{CompensatedLight, Strategy};
-use crate::warp::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
+use crate::warp::{square_to_cosine_hemisphere, square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use envlight::light::Density;
 use envlight::portal::{Portal, PortalLight, PortalOptions, PortalPoint};
-use envlight::rng::SplitMix64;
+use envlight::rng::{mix64, SplitMix64};
 use envlight::visibility::{VisibilityOptions, VisibilityPoint, VisibilitySummary};
 use envlight::{
     EnvironmentLight, Factor, ProductOptions, ProductSampler, ShadingPoint, Vec3, VisibilityCache,
@@ -43,6 +43,9 @@ pub const PORTAL_RESOLUTION: usize = 128;
 
 /// Bounces after which Russian roulette starts.
 pub const ROULETTE_DEPTH: u32 = 3;
+
+/// Seed of the bounces whose hits join the camera's in `mis-visibility`'s cache.
+const BOUNCE_SEED: u64 = 0xb0_0ce5;
 
 /// Estimates the radiance arriving along camera rays.
 ///
@@ -169,7 +172,8 @@ impl<'a> Integrator<'a> {
     }
 
     /// For `mis-visibility`: builds the visibility cache from the first hits of
-    /// the camera's rays through the pixel centres of a `width × height` image,
+    /// the camera's rays through the pixel centres of a `width × height` image
+    /// and the hits of one cosine-distributed bounce from each,
     /// each ray's transmittance being the scene's own shadow-ray test, and
     /// returns what it holds. `None` (and nothing built) for other strategies.
     ///
@@ -202,7 +206,26 @@ impl<'a> Integrator<'a> {
                 Some((hit.point, normal))
             })
             .collect();
-        let (points, normals): (Vec<Vec3>, Vec<Vec3>) = hits.into_iter().unzip();
+        // And where those points' light comes from: one cosine-distributed bounce
+        // from each, so the surfaces the camera does not see but paths reach
+        // (the walls behind it) have entries too.
+        let bounces: Vec<(Vec3, Vec3)> = hits
+            .par_iter()
+            .enumerate()
+            .filter_map(|(i, &(p, n))| {
+                let mut rng = SplitMix64::new(mix64(BOUNCE_SEED ^ i as u64));
+                let local = square_to_cosine_hemisphere([rng.next_f32(), rng.next_f32()]);
+                let d = Frame::from_normal(n).to_world(local);
+                let hit = scene.intersect(&Ray::spawn(p, n, d), f32::INFINITY)?;
+                let normal = if hit.normal.dot(d) > 0.0 {
+                    -hit.normal
+                } else {
+                    hit.normal
+                };
+                Some((hit.point, normal))
+            })
+            .collect();
+        let (points, normals): (Vec<Vec3>, Vec<Vec3>) = hits.into_iter().chain(bounces).unzip();
         let trace = |origins: &[Vec3], directions: &[Vec3], out: &mut [f32]| {
             out.par_iter_mut()
                 .zip(origins.par_iter().zip(directions.par_iter()))
