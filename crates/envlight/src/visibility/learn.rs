@@ -12,6 +12,12 @@ use crate::product::patches::Patches;
 use crate::product::ProductSampler;
 use crate::rng::{mix64, SplitMix64};
 
+/// An entry whose probe (one ray per patch) saw at least this share of the
+/// light it faces is nearly open: its learned share `α (1 − V̄_e)` stays small,
+/// the product sampler serves it, and it gets no more first-pass rays (only its
+/// edges' second-pass rays). In the open scenes this halves the build.
+const NEARLY_OPEN: f64 = 0.9;
+
 /// Rays per call of the callback: large enough for a renderer to spread a
 /// batch over its threads, small enough to keep the build's memory flat.
 const BATCH: usize = 1 << 16;
@@ -72,41 +78,16 @@ pub(crate) fn learn<E>(
         owners: Vec::with_capacity(BATCH),
         transmittance: vec![0.0; BATCH],
     };
-    let mut rays = 0u64;
-    // First pass: a few rays towards every lit patch each entry can face.
-    for (e, group) in groups.iter().enumerate() {
-        let mut rng = SplitMix64::new(mix64(options.seed ^ mix64(e as u64)));
-        for k in 0..count {
-            if pending[e].bound[k] > 0.0 {
-                let aim = Aim {
-                    entry: e,
-                    patch: k,
-                    rays: options.rays_per_patch,
-                };
-                rays += batch.shoot(
-                    aim,
-                    group,
-                    points,
-                    normals,
-                    &patches,
-                    &mut rng,
-                    &mut pending,
-                    &mut trace,
-                )?;
-            }
-        }
-    }
-    rays += batch.flush(&mut pending, &mut trace)?;
-    // Second pass: more rays where the first saw an edge of what the entry sees.
-    if options.refine_rays > 0 {
-        let grid = Neighbours::of(product);
+    let grid = Neighbours::of(product);
+    let mut pass = |seed: u64, plan: &dyn Fn(&Pending) -> Vec<usize>, rays_each: usize| {
+        let mut rays = 0u64;
         for (e, group) in groups.iter().enumerate() {
-            let mut rng = SplitMix64::new(mix64(options.seed ^ mix64(!(e as u64))));
-            for k in pending[e].edges(&grid) {
+            let mut rng = SplitMix64::new(mix64(seed ^ mix64(e as u64)));
+            for k in plan(&pending[e]) {
                 let aim = Aim {
                     entry: e,
                     patch: k,
-                    rays: options.refine_rays,
+                    rays: rays_each,
                 };
                 rays += batch.shoot(
                     aim,
@@ -121,6 +102,30 @@ pub(crate) fn learn<E>(
             }
         }
         rays += batch.flush(&mut pending, &mut trace)?;
+        Ok::<u64, VisibilityError<E>>(rays)
+    };
+    // A probe: one ray towards every lit patch each entry can face.
+    let mut rays = pass(options.seed, &|p| p.faceable().collect(), 1)?;
+    // The rest of the first pass, for the entries the probe did not find
+    // nearly open.
+    if options.rays_per_patch > 1 {
+        let plan = |p: &Pending| {
+            if p.seen_share(&patches) < NEARLY_OPEN {
+                p.faceable().collect()
+            } else {
+                Vec::new()
+            }
+        };
+        rays += pass(mix64(options.seed ^ 1), &plan, options.rays_per_patch - 1)?;
+    }
+    // The second pass: more rays where the first saw an edge of what the entry
+    // sees.
+    if options.refine_rays > 0 {
+        rays += pass(
+            mix64(options.seed ^ 2),
+            &|p| p.edges(&grid),
+            options.refine_rays,
+        )?;
     }
 
     let entries = pending
@@ -174,6 +179,29 @@ impl Neighbours {
 }
 
 impl Pending {
+    /// The lit patches the entry can face.
+    fn faceable(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.bound.len()).filter(|&k| self.bound[k] > 0.0)
+    }
+
+    /// The share of the light the entry faces that its rays so far saw
+    /// (`Σ t̄_k P_k C_e[k] / Σ P_k C_e[k]` over the patches traced; 1 if none).
+    fn seen_share(&self, patches: &Patches<'_>) -> f64 {
+        let (mut seen, mut facing) = (0.0f64, 0.0f64);
+        for k in 0..self.bound.len() {
+            if self.count[k] > 0 {
+                let w = patches.power(k) * self.bound[k] as f64;
+                facing += w;
+                seen += w * (self.sum[k] / self.count[k] as f32) as f64;
+            }
+        }
+        if facing > 0.0 {
+            seen / facing
+        } else {
+            1.0
+        }
+    }
+
     /// Whether the first pass's rays to patch `k` all escaped (`Some(true)`),
     /// were all blocked (`Some(false)`), or neither, or none was traced (`None`).
     fn outcome(&self, k: usize) -> Option<bool> {
