@@ -107,6 +107,8 @@ pub mod guides {
     pub struct Portals;
     #[doc = include_str!("../docs/sun.md")]
     pub struct Sun;
+    #[doc = include_str!("../docs/visibility.md")]
+    pub struct Visibility;
     #[doc = include_str!("../docs/gpu-tables.md")]
     pub struct GpuTables;
     #[doc = include_str!("../docs/c-api.md")]
