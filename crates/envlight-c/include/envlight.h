@@ -72,6 +72,16 @@ typedef enum envlight_status {
    * where; please report it.
    */
   ENVLIGHT_ERROR_INTERNAL = 7,
+  /**
+   * A callback of the caller's (the visibility cache's `envlight_visibility_trace`)
+   * returned a status other than `ENVLIGHT_OK`. The message gives that status.
+   */
+  ENVLIGHT_ERROR_CALLBACK = 8,
+  /**
+   * A saved file was made for other inputs than the ones given (a visibility
+   * cache for another light or scene key). The message names both.
+   */
+  ENVLIGHT_ERROR_MISMATCH = 9,
 } envlight_status;
 
 /**
@@ -278,6 +288,16 @@ typedef struct envlight_product envlight_product;
 typedef struct envlight_sun_extraction envlight_sun_extraction;
 
 /**
+ * A visibility cache over a product sampler: for each entry (a cell of space
+ * times a cell of normals) where the build's points fell, what share of each
+ * patch of the light it sees, and the sampling distribution that follows.
+ * Opaque and immutable once built: a `const` pointer serves any number of
+ * threads. It keeps the product sampler (and its light) alive; free it with
+ * `envlight_visibility_cache_free`.
+ */
+typedef struct envlight_visibility_cache envlight_visibility_cache;
+
+/**
  * How a light is built. Start from `envlight_light_options_default()` and change
  * fields; the enumerated fields hold the values of `envlight_sampler`,
  * `envlight_density`, `envlight_mapping` and `envlight_lookup`.
@@ -450,6 +470,101 @@ typedef struct envlight_factor {
    */
   float roughness;
 } envlight_factor;
+
+/**
+ * How a visibility cache is built. Start from
+ * `envlight_visibility_options_default()` and change fields.
+ */
+typedef struct envlight_visibility_options {
+  /**
+   * Side of the cubic cells that group points into entries, in world units;
+   * 0 (the default) chooses it from the points, so that about
+   * `target_entries` entries form. Otherwise positive and finite.
+   */
+  float radius;
+  /**
+   * Cells per side of the octahedral grid of normals that splits a cell's
+   * points by orientation, 1 to 16 (4: groups about 50° across).
+   */
+  uint32_t normal_bins;
+  /**
+   * The number of entries the automatic radius aims at (at least 1).
+   */
+  size_t target_entries;
+  /**
+   * Bytes the entries' tables may take; the radius grows until they fit.
+   */
+  size_t memory_budget;
+  /**
+   * Rays per entry and lit patch it can face, 1 to 4096.
+   */
+  uint32_t rays_per_patch;
+  /**
+   * The learned distribution's largest share of the mixture, in [0, 1); an
+   * entry's share shrinks with the share of its sky it sees.
+   */
+  float learned_share;
+  /**
+   * The prior count of unoccluded rays in each visibility estimate (positive
+   * and finite), so that no estimate is 0.
+   */
+  float prior;
+  /**
+   * Seed of the rays' directions and origins.
+   */
+  uint64_t seed;
+  /**
+   * Must be zero: room for options added later without changing this struct's size.
+   */
+  uint32_t reserved[4];
+} envlight_visibility_options;
+
+/**
+ * The renderer's tracer, called by `envlight_visibility_cache_build` with
+ * batches of `count` rays: `origins` and `directions` hold `count · 3` floats
+ * each (world frame, z up; unit directions; rays start exactly at the given
+ * points, so offset them as your shadow rays need), and the callback writes the
+ * transmittance in [0, 1] of each ray to `transmittance[0..count]` (1: the ray
+ * escapes to the sky; 0: it is blocked). `user` is the pointer given to the
+ * build. It returns `ENVLIGHT_OK` (0) on success; any other value stops the
+ * build, which returns `ENVLIGHT_ERROR_CALLBACK` with a message giving the
+ * value. The arrays are valid during the call only. It is called on the thread
+ * that called the build, one batch at a time (never concurrently), and must not
+ * unwind or `longjmp` out (catch C++ exceptions inside; `envlight.hpp` does).
+ */
+typedef int32_t (*envlight_visibility_trace)(void *user,
+                                             const float *origins,
+                                             const float *directions,
+                                             size_t count,
+                                             float *transmittance);
+
+/**
+ * What a visibility cache holds (`envlight_visibility_cache_summary`).
+ */
+typedef struct envlight_visibility_summary {
+  /**
+   * Entries.
+   */
+  uint64_t entries;
+  /**
+   * Bytes of the entries' tables and of the lookup.
+   */
+  uint64_t bytes;
+  /**
+   * The cells' side, world units.
+   */
+  float radius;
+  /**
+   * The light-weighted visibility of each entry over the patches it can
+   * face, averaged over entries, in [0, 1].
+   */
+  double mean_visibility;
+  /**
+   * Rays traced to build it (those of the build that made it, for a loaded
+   * cache).
+   */
+  uint64_t rays;
+} envlight_visibility_summary;
 
 /**
  * A compact bright source as a uniform disc. Radiometric values are linear RGB
@@ -787,6 +902,120 @@ enum envlight_status envlight_product_pdf_batch(const struct envlight_product *p
                                                 const float *directions,
                                                 size_t n,
                                                 float *pdf);
+
+/**
+ * The default options: the automatic radius aiming at 512 entries, 4 × 4 bins
+ * of normals, a 64 MiB budget, 4 rays per entry and patch, a learned share of
+ * 0.9, a prior of 0.1 rays and the library's seed.
+ */
+struct envlight_visibility_options envlight_visibility_options_default(void);
+
+/**
+ * Builds a visibility cache over `product` from `count` shading points:
+ * `points` and `normals` hold `count · 3` floats each (world frame; normals
+ * need not be unit length, but must be finite and non-zero, and the points
+ * finite), typically the first hits of the renderer's camera rays. The build
+ * asks `trace(user, ...)` for the transmittance of batches of rays (see
+ * `envlight_visibility_trace`); `options` NULL means the defaults. `*out` holds
+ * the cache on success (NULL on failure).
+ *
+ * Statuses: `ENVLIGHT_ERROR_CALLBACK` when `trace` returns anything but
+ * `ENVLIGHT_OK`; `ENVLIGHT_ERROR_INVALID_ARGUMENT` for a NULL argument, an
+ * option out of range (`options.FIELD ...`), a point or normal that is not
+ * finite or a zero normal (`point i: ...`), or a transmittance the callback
+ * wrote that is NaN or outside [0, 1] (naming the ray and the value).
+ */
+enum envlight_status envlight_visibility_cache_build(const struct envlight_product *product,
+                                                     const float *points,
+                                                     const float *normals,
+                                                     size_t count,
+                                                     const struct envlight_visibility_options *options,
+                                                     envlight_visibility_trace trace,
+                                                     void *user,
+                                                     struct envlight_visibility_cache **out);
+
+/**
+ * Frees a visibility cache (NULL: nothing).
+ */
+void envlight_visibility_cache_free(struct envlight_visibility_cache *cache);
+
+/**
+ * Draws a direction at the shading point `point` with normal `normal` (world
+ * frame; any length) for `u` in [0, 1)², from the cache's mixture of its
+ * learned distribution and the product sampler's cosine-weighted one (the
+ * product sampler alone where the build put no entry). Returns false and zeroes
+ * `*out` when nothing lit can be drawn there, `u` is not finite, or an argument
+ * is NULL.
+ */
+bool envlight_visibility_cache_sample(const struct envlight_visibility_cache *cache,
+                                      const float *point,
+                                      const float *normal,
+                                      const float *u,
+                                      struct envlight_sample *out);
+
+/**
+ * The density (per steradian) with which `envlight_visibility_cache_sample`
+ * draws the unit world direction `direction` at `(point, normal)`; 0 for NULL
+ * arguments.
+ */
+float envlight_visibility_cache_pdf(const struct envlight_visibility_cache *cache,
+                                    const float *point,
+                                    const float *normal,
+                                    const float *direction);
+
+/**
+ * `envlight_visibility_cache_sample` for each of `n` shading points:
+ * `points[3i..3i+3]`, `normals[3i..3i+3]` and `u[2i], u[2i+1]` give `out[i]`, in
+ * parallel; independent of the thread count.
+ */
+enum envlight_status envlight_visibility_cache_sample_batch(const struct envlight_visibility_cache *cache,
+                                                            const float *points,
+                                                            const float *normals,
+                                                            const float *u,
+                                                            size_t n,
+                                                            struct envlight_sample *out);
+
+/**
+ * `envlight_visibility_cache_pdf` for each of `n` shading points: `points[3i..]`,
+ * `normals[3i..]` and the direction `directions[3i..3i+3]` give `pdf[i]`, in
+ * parallel (0 for the all-zero direction of a sample that drew none).
+ */
+enum envlight_status envlight_visibility_cache_pdf_batch(const struct envlight_visibility_cache *cache,
+                                                         const float *points,
+                                                         const float *normals,
+                                                         const float *directions,
+                                                         size_t n,
+                                                         float *pdf);
+
+/**
+ * Writes the cache to the file `path` with `scene_key` (UTF-8, at most 65536
+ * bytes: what says which scene it was learned in, such as a file name and a
+ * version or a hash of the geometry). The file is written whole or not at all.
+ * `ENVLIGHT_ERROR_IO` (or `_NOT_FOUND` for a missing folder) names the path.
+ */
+enum envlight_status envlight_visibility_cache_save(const struct envlight_visibility_cache *cache,
+                                                    const char *path,
+                                                    const char *scene_key);
+
+/**
+ * Reads a cache saved by `envlight_visibility_cache_save` for `product`'s light
+ * in the scene `scene_key`. `*out` holds it on success (NULL on failure).
+ * `ENVLIGHT_ERROR_MISMATCH` when the file was made for another light (image,
+ * options or patch grid) or another scene key, with a message naming both;
+ * `ENVLIGHT_ERROR_NOT_FOUND`, `_IO` or `_FORMAT` (a file that is not a
+ * well-formed cache) naming the path.
+ */
+enum envlight_status envlight_visibility_cache_load(const char *path,
+                                                    const struct envlight_product *product,
+                                                    const char *scene_key,
+                                                    struct envlight_visibility_cache **out);
+
+/**
+ * Fills `*summary` with what the cache holds: entries, bytes, radius, mean
+ * visibility and rays.
+ */
+enum envlight_status envlight_visibility_cache_summary(const struct envlight_visibility_cache *cache,
+                                                       struct envlight_visibility_summary *summary);
 
 /**
  * Looks for the light's sun (radius <= 5°, contrast >= 20, >= 1% of the power) and

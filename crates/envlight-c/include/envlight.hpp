@@ -14,9 +14,11 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "envlight.h"
@@ -116,6 +118,30 @@ std::optional<T> optional_out(Get get, Args... args) noexcept {
     return std::nullopt;
 }
 
+/// What the visibility callback's trampoline carries: the caller's callable, and
+/// the exception it threw, if any.
+template <typename Trace>
+struct trace_call {
+    Trace &trace;
+    std::exception_ptr thrown;
+};
+
+/// The C callback (envlight_visibility_trace) over a C++ callable: an exception
+/// it throws never crosses the C boundary; it is kept here, the build stops with
+/// ENVLIGHT_ERROR_CALLBACK, and the wrapper rethrows it once the C call returns.
+template <typename Trace>
+std::int32_t trace_trampoline(void *user, const float *origins, const float *directions,
+                              std::size_t count, float *transmittance) noexcept {
+    auto *call = static_cast<trace_call<Trace> *>(user);
+    try {
+        call->trace(origins, directions, count, transmittance);
+        return ENVLIGHT_OK;
+    } catch (...) {
+        call->thrown = std::current_exception();
+        return ENVLIGHT_ERROR_CALLBACK;
+    }
+}
+
 }  // namespace detail
 
 /// The library's version, "MAJOR.MINOR.PATCH".
@@ -123,6 +149,11 @@ inline std::string version() { return envlight_version(); }
 
 /// The default light options (see envlight_light_options).
 inline envlight_light_options default_options() { return envlight_light_options_default(); }
+
+/// The default visibility cache options (see envlight_visibility_options).
+inline envlight_visibility_options default_visibility_options() {
+    return envlight_visibility_options_default();
+}
 
 class product;
 class portal_light;
@@ -250,6 +281,106 @@ public:
         detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
         detail::check(envlight_product_pdf_batch(h_.get(), factors.data(), directions.data(), n, pdf.data()));
     }
+};
+
+/// Sampling at shading points in proportion to the sky each region of the scene
+/// sees, learned from rays the renderer traces (envlight_visibility_cache). Queries
+/// are const and thread-safe; the cache keeps its product sampler alive.
+class visibility_cache
+    : public detail::owner<envlight_visibility_cache, envlight_visibility_cache_free> {
+public:
+    /// Builds the cache over `p` from shading points and their normals (3 floats
+    /// each per point, world frame), calling `trace(origins, directions, count,
+    /// transmittance)` (any callable taking `const float *, const float *,
+    /// std::size_t, float *`) for batches of rays: it writes `count`
+    /// transmittances in [0, 1]. An exception it throws stops the build and
+    /// arrives here unchanged; every other failure is an envlight::error.
+    template <typename P, typename N, typename Trace>
+    static visibility_cache build(const product &p, const P &points, const N &normals,
+                                  Trace &&trace,
+                                  const envlight_visibility_options &options =
+                                      default_visibility_options()) {
+        const std::size_t n = static_cast<std::size_t>(points.size()) / 3;
+        detail::check_size(static_cast<std::size_t>(normals.size()), 3 * n, "normals");
+        using callable = std::remove_reference_t<Trace>;
+        detail::trace_call<callable> call{trace, nullptr};
+        envlight_visibility_cache *c = nullptr;
+        const envlight_status status = envlight_visibility_cache_build(
+            p.get(), points.data(), normals.data(), n, &options,
+            detail::trace_trampoline<callable>, &call, &c);
+        handle h(c);
+        if (call.thrown) {
+            std::rethrow_exception(call.thrown);
+        }
+        detail::check(status);
+        return visibility_cache(std::move(h));
+    }
+
+    /// Reads a cache saved by `save` for the light of `p` in the scene
+    /// `scene_key`; envlight::error with ENVLIGHT_ERROR_MISMATCH naming both when
+    /// it was made for another light or scene.
+    static visibility_cache load(const std::string &path, const product &p,
+                                 const std::string &scene_key) {
+        return visibility_cache(handle::made_by(envlight_visibility_cache_load, path.c_str(),
+                                                p.get(), scene_key.c_str()));
+    }
+
+    /// Writes the cache to `path` with `scene_key`, which says which scene it was
+    /// learned in.
+    void save(const std::string &path, const std::string &scene_key) const {
+        detail::check(envlight_visibility_cache_save(h_.get(), path.c_str(), scene_key.c_str()));
+    }
+
+    /// A direction at the shading point `point` with normal `normal` for `u` in
+    /// [0, 1)^2, or nothing.
+    std::optional<envlight_sample> sample(const std::array<float, 3> &point,
+                                          const std::array<float, 3> &normal,
+                                          const std::array<float, 2> &u) const noexcept {
+        return detail::optional_out<envlight_sample>(envlight_visibility_cache_sample, h_.get(),
+                                                     point.data(), normal.data(), u.data());
+    }
+
+    /// The pdf (per steradian) of a unit world direction at `(point, normal)`.
+    float pdf(const std::array<float, 3> &point, const std::array<float, 3> &normal,
+              const std::array<float, 3> &direction) const noexcept {
+        return envlight_visibility_cache_pdf(h_.get(), point.data(), normal.data(),
+                                             direction.data());
+    }
+
+    /// One sample per shading point of `points` and `normals` (3 floats each) and
+    /// point of `u` (2 floats each) into `out` (as many samples).
+    template <typename P, typename N, typename U, typename S>
+    void sample(const P &points, const N &normals, const U &u, S &out) const {
+        const std::size_t n = static_cast<std::size_t>(out.size());
+        detail::check_size(static_cast<std::size_t>(points.size()), 3 * n, "points");
+        detail::check_size(static_cast<std::size_t>(normals.size()), 3 * n, "normals");
+        detail::check_size(static_cast<std::size_t>(u.size()), 2 * n, "u");
+        detail::check(envlight_visibility_cache_sample_batch(h_.get(), points.data(),
+                                                             normals.data(), u.data(), n,
+                                                             out.data()));
+    }
+
+    /// The pdf of each direction of `directions` at its shading point into `pdf`.
+    template <typename P, typename N, typename D, typename Q>
+    void pdf(const P &points, const N &normals, const D &directions, Q &pdf) const {
+        const std::size_t n = static_cast<std::size_t>(pdf.size());
+        detail::check_size(static_cast<std::size_t>(points.size()), 3 * n, "points");
+        detail::check_size(static_cast<std::size_t>(normals.size()), 3 * n, "normals");
+        detail::check_size(static_cast<std::size_t>(directions.size()), 3 * n, "directions");
+        detail::check(envlight_visibility_cache_pdf_batch(h_.get(), points.data(),
+                                                          normals.data(), directions.data(), n,
+                                                          pdf.data()));
+    }
+
+    /// Entries, bytes, radius, mean visibility, rays.
+    envlight_visibility_summary summary() const {
+        envlight_visibility_summary s;
+        detail::check(envlight_visibility_cache_summary(h_.get(), &s));
+        return s;
+    }
+
+private:
+    explicit visibility_cache(handle h) noexcept : owner(std::move(h)) {}
 };
 
 /// The light seen through portals (envlight_portal_light).

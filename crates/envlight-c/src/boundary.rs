@@ -59,6 +59,7 @@ impl From<envlight::Error> for Failure {
             }
             E::InvalidOption(_) | E::LightOption { .. } => ENVLIGHT_ERROR_INVALID_ARGUMENT,
             E::Unsupported(_) | E::HalfOverflow { .. } => ENVLIGHT_ERROR_UNSUPPORTED,
+            E::Mismatch { .. } => ENVLIGHT_ERROR_MISMATCH,
             _ => ENVLIGHT_ERROR_INTERNAL,
         };
         Self {

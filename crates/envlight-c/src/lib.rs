@@ -71,6 +71,8 @@ mod gpu;
 mod portal;
 // `envlight_product`.
 mod product;
+// `envlight_visibility_cache`, its options, callback and summary.
+mod visibility;
 // `envlight_sun_extraction`.
 mod sun;
 
@@ -83,6 +85,7 @@ pub use sample::envlight_sample;
 pub use status::*;
 pub use sun::*;
 pub use version::*;
+pub use visibility::*;
 
 #[cfg(test)]
 mod tests;

@@ -84,7 +84,7 @@ pub(crate) unsafe fn new_from_light<T>(
 }
 
 /// A C path as a filesystem path (any bytes on Unix).
-fn path_of(path: &CStr) -> std::path::PathBuf {
+pub(crate) fn path_of(path: &CStr) -> std::path::PathBuf {
     #[cfg(unix)]
     {
         use std::os::unix::ffi::OsStrExt;

@@ -16,7 +16,8 @@ use crate::{envlight_light, envlight_sample, envlight_status};
 /// Opaque and immutable: a `const` pointer serves any number of threads. It keeps
 /// the light alive; free it with `envlight_product_free`.
 pub struct envlight_product {
-    product: ProductSampler,
+    /// Shared with the visibility caches built over it, which keep it alive.
+    pub(crate) product: Arc<ProductSampler>,
 }
 
 /// What multiplies the light's radiance at a shading point (world frame; vectors
@@ -60,7 +61,9 @@ pub extern "C" fn envlight_product_new(
 ) -> envlight_status {
     let build = |light: &Arc<EnvironmentLight>| -> Result<_, Failure> {
         let product = ProductSampler::new(Arc::clone(light), ProductOptions::default());
-        Ok(envlight_product { product })
+        Ok(envlight_product {
+            product: Arc::new(product),
+        })
     };
     // SAFETY: by the C contract `out` is NULL or points to a writable
     // `envlight_product *`, and `light` is NULL or a light from

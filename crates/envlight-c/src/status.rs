@@ -32,6 +32,12 @@ pub enum envlight_status {
     /// A bug in envlight, caught at the boundary (a Rust panic). The message says
     /// where; please report it.
     ENVLIGHT_ERROR_INTERNAL = 7,
+    /// A callback of the caller's (the visibility cache's `envlight_visibility_trace`)
+    /// returned a status other than `ENVLIGHT_OK`. The message gives that status.
+    ENVLIGHT_ERROR_CALLBACK = 8,
+    /// A saved file was made for other inputs than the ones given (a visibility
+    /// cache for another light or scene key). The message names both.
+    ENVLIGHT_ERROR_MISMATCH = 9,
 }
 
 /// Copies this thread's last error message into `buf` (at most `len - 1` bytes and
@@ -67,6 +73,8 @@ pub extern "C" fn envlight_status_name(status: u32) -> *const c_char {
         5 => "ENVLIGHT_ERROR_INVALID_IMAGE\0",
         6 => "ENVLIGHT_ERROR_UNSUPPORTED\0",
         7 => "ENVLIGHT_ERROR_INTERNAL\0",
+        8 => "ENVLIGHT_ERROR_CALLBACK\0",
+        9 => "ENVLIGHT_ERROR_MISMATCH\0",
         _ => "unknown status\0",
     };
     name.as_ptr().cast()

@@ -9,6 +9,9 @@ use envlight::{EnvImage, EnvironmentLight};
 use std::ffi::{c_char, CStr};
 use std::ptr::{null, null_mut};
 
+// The visibility cache's tests, over the helpers here.
+mod visibility;
+
 /// A small sun-and-sky map.
 fn sky() -> (Vec<f32>, u32, u32) {
     let image = envlight::builtin::sky(64, 32);

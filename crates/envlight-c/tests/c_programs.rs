@@ -1,7 +1,9 @@
 //! C and C++ programs built against the installed library (`scripts/install-c`),
 //! through pkg-config and through CMake's `find_package(envlight)`, linked
 //! statically and dynamically: their rows equal the Rust library's bit for bit
-//! on a synthetic map and a real one; every error path is a status and a message;
+//! on a synthetic map and a real one (a visibility cache built through a C
+//! callback and a C++ lambda included); every error path is a status and a
+//! message;
 //! the header compiles as C99, C11 and C++17 with warnings as errors; the C
 //! programs run clean under valgrind memcheck; eight threads on one light give
 //! the single-threaded rows; the shared library exports only `envlight_*`.
@@ -16,9 +18,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use envlight::{EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3};
+use envlight::visibility::VisibilityOptions;
+use envlight::{
+    EnvironmentLight, Factor, LightOptions, ProductOptions, ProductSampler, Vec3, VisibilityCache,
+};
 
-/// The C sources: rows.c, rows.cpp, errors.c, CMakeLists.txt.
+/// The C sources: rows.c, rows.cpp, errors.c, visibility.c, visibility.cpp,
+/// CMakeLists.txt.
 fn sources() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/c")
 }
@@ -58,7 +64,8 @@ struct Built {
     prefix: PathBuf,
     work: tempfile::TempDir,
     /// name → executable: `pc_c_shared`, `pc_c_static`, `pc_cpp_shared`,
-    /// `pc_cpp_static`, `pc_errors`, and CMake's `cmake/rows_shared`, ...
+    /// `pc_cpp_static`, `pc_errors_shared`, `pc_visibility_shared`,
+    /// `pc_visibility_cpp_shared`, ..., and CMake's `cmake_rows_shared`, ...
     programs: BTreeMap<String, PathBuf>,
 }
 
@@ -110,6 +117,8 @@ fn build() -> Result<Built, String> {
         compile("c", "cc", "-std=c99", "rows.c", &["-pthread"]);
         compile("cpp", "c++", "-std=c++17", "rows.cpp", &[]);
         compile("errors", "cc", "-std=c11", "errors.c", &["-lm"]);
+        compile("visibility", "cc", "-std=c99", "visibility.c", &["-lm"]);
+        compile("visibility_cpp", "c++", "-std=c++17", "visibility.cpp", &[]);
     }
     // CMake: find_package(envlight) from the prefix.
     let cmake = work.path().join("cmake");
@@ -122,7 +131,7 @@ fn build() -> Result<Built, String> {
         .arg("-DCMAKE_BUILD_TYPE=Release"));
     run(Command::new("cmake").arg("--build").arg(&cmake).arg("-j2"));
     for kind in ["shared", "static"] {
-        for name in ["rows", "rows_cpp", "errors"] {
+        for name in ["rows", "rows_cpp", "errors", "visibility", "visibility_cpp"] {
             let name = format!("{name}_{kind}");
             programs.insert(format!("cmake_{name}"), cmake.join(&name));
         }
@@ -339,7 +348,7 @@ fn programs_give_the_rust_librarys_rows_bit_for_bit() {
     maps.extend(real());
     for map in &maps {
         for (name, program) in &b.programs {
-            if name.contains("errors") {
+            if name.contains("errors") || name.contains("visibility") {
                 continue;
             }
             let kinds: &[&str] = if name.contains("cpp") {
@@ -348,6 +357,153 @@ fn programs_give_the_rust_librarys_rows_bit_for_bit() {
                 &["S", "P", "L", "C", "G", "Q"]
             };
             check_program(program, map, &inputs, kinds);
+            eprintln!("{name} on {}: rows equal the library's", map.arg);
+        }
+    }
+}
+
+/// The room of tests/c/visibility.c, as that program computes it: 1 when the ray
+/// from `o` (inside the box `[-1, 1]² × [0, 2]`) along `d` leaves through the
+/// window in its `+x` wall (`|y| < 0.4`, `0.6 < z < 1.4`), else 0.
+fn room(o: Vec3, d: Vec3) -> f32 {
+    let exit = |o: f32, d: f32, lo: f32, hi: f32| {
+        if d > 0.0 {
+            (hi - o) / d
+        } else if d < 0.0 {
+            (lo - o) / d
+        } else {
+            f32::INFINITY
+        }
+    };
+    let (tx, ty, tz) = (
+        exit(o.x, d.x, -1.0, 1.0),
+        exit(o.y, d.y, -1.0, 1.0),
+        exit(o.z, d.z, 0.0, 2.0),
+    );
+    let (y, z) = (o.y + d.y * tx, o.z + d.z * tx);
+    let window = d.x > 0.0 && tx <= ty && tx <= tz;
+    (window && y.abs() < 0.4 && z > 0.6 && z < 1.4) as u8 as f32
+}
+
+/// The visibility programs' query point `k` and its normal (their header says
+/// which).
+fn query_point(k: u32) -> (Vec3, Vec3) {
+    let (a, b) = ((k % 19) as f32 / 10.0 - 0.9, (k % 17) as f32 / 9.0 - 0.9);
+    let up = Vec3::new(0.0, 0.0, 1.0);
+    match k % 6 {
+        2 | 3 => (Vec3::new(-1.0, a, b + 1.0), Vec3::new(1.0, 0.0, 0.0)),
+        4 => (Vec3::new(5.0 + a, b, 3.0), up),
+        5 => (
+            Vec3::new(a, b, 0.0),
+            Vec3::new(0.0, 0.0, if k % 12 == 5 { 3.0 } else { 0.0 }),
+        ),
+        _ => (Vec3::new(a, b, 0.0), up),
+    }
+}
+
+/// The rows the visibility programs print, computed by the Rust library: the
+/// same cache built from the same points, rays and options.
+fn expected_visibility_rows(map: &Map, inputs: &Inputs) -> BTreeMap<String, String> {
+    let product = std::sync::Arc::new(ProductSampler::new(
+        map.light.clone(),
+        ProductOptions::default(),
+    ));
+    let (mut points, mut normals) = (Vec::new(), Vec::new());
+    for i in 0..20 {
+        for j in 0..20 {
+            let (a, b) = ((i as f32 + 0.5) / 10.0 - 1.0, (j as f32 + 0.5) / 10.0 - 1.0);
+            points.extend([Vec3::new(a, b, 0.0), Vec3::new(-1.0, a, b + 1.0)]);
+            normals.extend([Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 0.0)]);
+        }
+    }
+    let options = VisibilityOptions {
+        seed: 7,
+        rays_per_patch: 2,
+        ..VisibilityOptions::default()
+    };
+    let mut rays = 0u64;
+    let trace = |o: &[Vec3], d: &[Vec3], t: &mut [f32]| -> Result<(), std::convert::Infallible> {
+        rays += o.len() as u64;
+        for ((o, d), t) in o.iter().zip(d).zip(t.iter_mut()) {
+            *t = room(*o, *d);
+        }
+        Ok(())
+    };
+    let cache = VisibilityCache::build(product, &points, &normals, &options, trace).unwrap();
+    let s = cache.summary();
+    let mut rows = BTreeMap::new();
+    rows.insert(
+        "Y".to_string(),
+        format!(
+            "{} {} {} {:016x} {}",
+            s.entries,
+            s.bytes,
+            hex(s.radius),
+            s.mean_visibility.to_bits(),
+            s.rays
+        ),
+    );
+    rows.insert("T".to_string(), rays.to_string());
+    for k in 0..inputs.u.len() {
+        let (p, n) = query_point(k as u32);
+        let at = cache.at(p, &Factor::cosine(n));
+        let (ok, d, pdf, l) = match at.sample(inputs.u[k]) {
+            Some(s) => (1, s.direction.to_array(), s.pdf, s.radiance),
+            None => (0, [0.0; 3], 0.0, [0.0; 3]),
+        };
+        let mut words = vec![ok.to_string()];
+        words.extend(
+            d.iter()
+                .chain([pdf].iter())
+                .chain(l.iter())
+                .map(|&x| hex(x)),
+        );
+        rows.insert(format!("V {k}"), words.join(" "));
+        rows.insert(format!("W {k}"), hex(at.pdf(inputs.dirs[k])));
+    }
+    rows
+}
+
+#[test]
+fn visibility_programs_give_the_rust_librarys_rows_bit_for_bit() {
+    let Some(b) = programs() else { return };
+    let inputs = inputs(b.work.path(), 600);
+    let mut maps = vec![synthetic(b.work.path(), 128, 64)];
+    maps.extend(real());
+    for map in &maps {
+        let expected = expected_visibility_rows(map, &inputs);
+        for (name, program) in b.programs.iter().filter(|(n, _)| n.contains("visibility")) {
+            let dir = tempfile::tempdir().unwrap();
+            let out = run(Command::new(program)
+                .arg(&map.arg)
+                .arg(&inputs.path)
+                .arg(dir.path()));
+            let mut seen = 0;
+            for line in out.lines() {
+                let (kind, rest) = line.split_once(' ').unwrap_or((line, ""));
+                let (key, rest) = match kind {
+                    "V" | "W" => {
+                        let (k, rest) = rest.split_once(' ').unwrap_or((rest, ""));
+                        (format!("{kind} {k}"), rest)
+                    }
+                    _ => (kind.to_string(), rest),
+                };
+                let want = expected
+                    .get(&key)
+                    .unwrap_or_else(|| panic!("{name}: unexpected row {line:?}"));
+                assert_eq!(
+                    rest, want,
+                    "{name} on {}: row {key} differs from the Rust library's",
+                    map.arg
+                );
+                seen += 1;
+            }
+            assert_eq!(
+                seen,
+                expected.len(),
+                "{name}: {seen} rows of {}",
+                expected.len()
+            );
             eprintln!("{name} on {}: rows equal the library's", map.arg);
         }
     }
@@ -478,6 +634,15 @@ fn c_programs_run_clean_under_valgrind() {
                 inputs.path.as_os_str(),
                 "--threads".as_ref(),
                 "2".as_ref(),
+            ],
+        );
+        let dir = tempfile::tempdir().unwrap();
+        memcheck(
+            &b.programs[&format!("pc_visibility_{kind}")],
+            &[
+                map.arg.as_ref(),
+                inputs.path.as_os_str(),
+                dir.path().as_os_str(),
             ],
         );
     }

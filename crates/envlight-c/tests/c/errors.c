@@ -60,6 +60,145 @@ static void check(const char *what, int ok) {
     }
 }
 
+/* Visibility callbacks: every ray escapes; a failure status; a NaN; nothing
+ * written at all. */
+static int32_t open_sky(void *user, const float *o, const float *d, size_t n, float *t) {
+    size_t i;
+    (void)user, (void)o, (void)d;
+    for (i = 0; i < n; i++) t[i] = 1.0f;
+    return ENVLIGHT_OK;
+}
+
+static int32_t failing(void *user, const float *o, const float *d, size_t n, float *t) {
+    (void)o, (void)d, (void)n, (void)t;
+    ++*(int *)user;
+    return 3;
+}
+
+static int32_t nan_ray(void *user, const float *o, const float *d, size_t n, float *t) {
+    open_sky(user, o, d, n, t);
+    t[n - 1] = NAN;
+    return ENVLIGHT_OK;
+}
+
+static int32_t silent(void *user, const float *o, const float *d, size_t n, float *t) {
+    (void)user, (void)o, (void)d, (void)n, (void)t;
+    return ENVLIGHT_OK;
+}
+
+/* The visibility cache's error paths, over `light`; `dir` is writable. */
+static void visibility_errors(const envlight_light *light, const char *dir) {
+    envlight_product *product = NULL;
+    envlight_visibility_cache *cache = (envlight_visibility_cache *)&failures; /* reset to NULL */
+    envlight_visibility_options options = envlight_visibility_options_default();
+    envlight_visibility_summary summary;
+    envlight_sample s;
+    float points[6] = {0.0f, 0.0f, 0.0f, 0.5f, 0.0f, 0.0f}, normals[6] = {0, 0, 1, 0, 0, 1};
+    float u[2] = {0.5f, 0.5f}, pdf[2];
+    char path[4096], garbage[4096];
+    int calls = 0;
+
+    expect("visibility: product", envlight_product_new(light, &product), ENVLIGHT_OK, NULL);
+    expect("visibility: a failing callback",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, failing, &calls, &cache),
+           ENVLIGHT_ERROR_CALLBACK, "status 3");
+    check("visibility: out is NULL after a failure, one call", cache == NULL && calls == 1);
+    expect("visibility: a NaN transmittance",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, nan_ray, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "transmittance NaN");
+    expect("visibility: no transmittance written",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, silent, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "transmittance NaN for ray 0");
+    expect("visibility: NULL trace",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, NULL, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "trace is NULL");
+    expect("visibility: NULL product",
+           envlight_visibility_cache_build(NULL, points, normals, 2, NULL, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "product is NULL");
+    expect("visibility: NULL points",
+           envlight_visibility_cache_build(product, NULL, normals, 2, NULL, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "points is NULL");
+    expect("visibility: NULL out",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, open_sky, NULL, NULL),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "out is NULL");
+    options.normal_bins = 0;
+    expect("visibility: normal_bins 0",
+           envlight_visibility_cache_build(product, points, normals, 2, &options, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.normal_bins 0");
+    options = envlight_visibility_options_default();
+    options.learned_share = 1.0f;
+    expect("visibility: learned_share 1",
+           envlight_visibility_cache_build(product, points, normals, 2, &options, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.learned_share");
+    options = envlight_visibility_options_default();
+    options.radius = -1.0f;
+    expect("visibility: a negative radius",
+           envlight_visibility_cache_build(product, points, normals, 2, &options, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.radius");
+    options = envlight_visibility_options_default();
+    options.reserved[1] = 1;
+    expect("visibility: reserved",
+           envlight_visibility_cache_build(product, points, normals, 2, &options, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "options.reserved");
+    points[4] = NAN;
+    expect("visibility: a NaN point",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, open_sky, NULL, &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "point 1");
+    points[4] = 0.0f;
+
+    expect("visibility: a good cache",
+           envlight_visibility_cache_build(product, points, normals, 2, NULL, open_sky, NULL, &cache),
+           ENVLIGHT_OK, NULL);
+    check("visibility: summary", envlight_visibility_cache_summary(cache, &summary) == ENVLIGHT_OK &&
+                                     summary.entries >= 1 && summary.mean_visibility == 1.0);
+    expect("visibility: save into a missing folder",
+           envlight_visibility_cache_save(cache, "/nonexistent/dir/cache.envlvis", "key"),
+           ENVLIGHT_ERROR_NOT_FOUND, "/nonexistent/dir/cache.envlvis");
+    expect("visibility: save NULL path", envlight_visibility_cache_save(cache, NULL, "key"),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "path is NULL");
+    expect("visibility: save NULL key", envlight_visibility_cache_save(cache, "x", NULL),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "scene_key is NULL");
+    snprintf(path, sizeof path, "%s/good.envlvis", dir);
+    expect("visibility: save", envlight_visibility_cache_save(cache, path, "scene 1"), ENVLIGHT_OK, NULL);
+    envlight_visibility_cache_free(cache);
+    expect("visibility: load under another key",
+           envlight_visibility_cache_load(path, product, "scene 2", &cache), ENVLIGHT_ERROR_MISMATCH,
+           "in scene \"scene 1\", asked for light");
+    check("visibility: out is NULL after a mismatch", cache == NULL);
+    expect("visibility: load a missing file",
+           envlight_visibility_cache_load("/nonexistent/dir/cache.envlvis", product, "k", &cache),
+           ENVLIGHT_ERROR_NOT_FOUND, "/nonexistent/dir/cache.envlvis");
+    if (write_file(garbage, sizeof garbage, dir, "garbage.envlvis", "envlvis but not a cache"))
+        expect("visibility: load a garbage file",
+               envlight_visibility_cache_load(garbage, product, "k", &cache), ENVLIGHT_ERROR_FORMAT,
+               "garbage.envlvis");
+    expect("visibility: load NULL product", envlight_visibility_cache_load(path, NULL, "k", &cache),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "product is NULL");
+    expect("visibility: load", envlight_visibility_cache_load(path, product, "scene 1", &cache),
+           ENVLIGHT_OK, NULL);
+    envlight_product_free(product); /* the cache keeps it */
+
+    check("visibility: sample", envlight_visibility_cache_sample(cache, points, normals, u, &s) &&
+                                    s.pdf > 0.0f &&
+                                    envlight_visibility_cache_pdf(cache, points, normals, s.direction) ==
+                                        s.pdf);
+    check("visibility: sample NULL cache is false",
+          !envlight_visibility_cache_sample(NULL, points, normals, u, &s) && s.pdf == 0.0f);
+    expect("visibility: sample NULL cache message", ENVLIGHT_ERROR_INVALID_ARGUMENT,
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "cache is NULL");
+    check("visibility: pdf NULL normal is 0",
+          envlight_visibility_cache_pdf(cache, points, NULL, s.direction) == 0.0f);
+    expect("visibility: batch NULL directions",
+           envlight_visibility_cache_pdf_batch(cache, points, normals, NULL, 2, pdf),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "directions is NULL");
+    expect("visibility: batch of 0",
+           envlight_visibility_cache_sample_batch(cache, NULL, NULL, NULL, 0, NULL), ENVLIGHT_OK, NULL);
+    expect("visibility: summary NULL", envlight_visibility_cache_summary(cache, NULL),
+           ENVLIGHT_ERROR_INVALID_ARGUMENT, "summary is NULL");
+    envlight_visibility_cache_free(cache);
+    envlight_visibility_cache_free(NULL);
+}
+
 int main(int argc, char **argv) {
     envlight_light *light = (envlight_light *)&failures; /* must be reset to NULL */
     envlight_light_options options = envlight_light_options_default();
@@ -186,6 +325,7 @@ int main(int argc, char **argv) {
         expect("residual too small", envlight_sun_extraction_residual(sun, rgb, 5),
                ENVLIGHT_ERROR_INVALID_ARGUMENT, "len");
         envlight_sun_extraction_free(sun);
+        visibility_errors(light, argv[1]);
         options.sampler = ENVLIGHT_SAMPLER_HIERARCHICAL;
         options.density = ENVLIGHT_DENSITY_PIECEWISE_CONSTANT;
         envlight_light_free(light);
