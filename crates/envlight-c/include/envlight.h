@@ -496,9 +496,14 @@ typedef struct envlight_visibility_options {
    */
   size_t memory_budget;
   /**
-   * Rays per entry and lit patch it can face, 1 to 4096.
+   * Rays per entry and lit patch it can face in the first pass, 1 to 4096.
    */
   uint32_t rays_per_patch;
+  /**
+   * Rays per entry and patch in the second pass, towards the patches on an
+   * edge of what the first pass saw, 0 to 4096 (0: no second pass).
+   */
+  uint32_t refine_rays;
   /**
    * The learned distribution's largest share of the mixture, in [0, 1); an
    * entry's share shrinks with the share of its sky it sees.

@@ -42,8 +42,11 @@ pub struct envlight_visibility_options {
     pub target_entries: usize,
     /// Bytes the entries' tables may take; the radius grows until they fit.
     pub memory_budget: usize,
-    /// Rays per entry and lit patch it can face, 1 to 4096.
+    /// Rays per entry and lit patch it can face in the first pass, 1 to 4096.
     pub rays_per_patch: u32,
+    /// Rays per entry and patch in the second pass, towards the patches on an
+    /// edge of what the first pass saw, 0 to 4096 (0: no second pass).
+    pub refine_rays: u32,
     /// The learned distribution's largest share of the mixture, in [0, 1); an
     /// entry's share shrinks with the share of its sky it sees.
     pub learned_share: f32,
@@ -107,6 +110,7 @@ pub extern "C" fn envlight_visibility_options_default() -> envlight_visibility_o
         target_entries: d.target_entries,
         memory_budget: d.memory_budget,
         rays_per_patch: d.rays_per_patch as u32,
+        refine_rays: d.refine_rays as u32,
         learned_share: d.learned_share,
         prior: d.prior,
         seed: d.seed,
@@ -132,6 +136,7 @@ pub(crate) fn visibility_options(
         target_entries: o.target_entries,
         memory_budget: o.memory_budget,
         rays_per_patch: o.rays_per_patch as usize,
+        refine_rays: o.refine_rays as usize,
         learned_share: o.learned_share,
         prior: o.prior,
         seed: o.seed,
