@@ -47,7 +47,7 @@ mod entries;
 mod file;
 mod learn;
 
-pub use file::{light_hash, MAX_SCENE_KEY};
+pub use file::{light_hash, read_keys, SavedKeys, MAX_SCENE_KEY};
 
 use crate::distribution::Distribution1D;
 use crate::light::{solid_angle_density, LightSample};
