@@ -79,6 +79,9 @@ enum Command {
     /// Find the map's sun (a compact bright source): direction, size, radiance,
     /// irradiance; optionally write the map without it (--residual).
     Sun(cmd::sun::Args),
+    /// Summarise a saved visibility cache (render --save-visibility); draw what one
+    /// of its entries sees of the map (--entry E --image FILE.png).
+    Visibility(cmd::visibility::Args),
 }
 
 impl Command {
@@ -94,6 +97,7 @@ impl Command {
             Command::Render(args) => cmd::render::run(args).map(|()| cmd::Outcome::Success),
             Command::Shader(args) => cmd::shader::run(args),
             Command::Sun(args) => cmd::sun::run(args),
+            Command::Visibility(args) => cmd::visibility::run(args),
         }
     }
 }

@@ -1188,7 +1188,14 @@ fn bad_usage_exits_with_2() {
 
 #[test]
 fn help_explains_the_conventions() {
-    for cmd in ["info", "sample", "eval", "importance", "verify"] {
+    for cmd in [
+        "info",
+        "sample",
+        "eval",
+        "importance",
+        "verify",
+        "visibility",
+    ] {
         let text = stdout_of(envlight().args([cmd, "--help"]));
         assert!(text.contains("z up"), "{cmd}: {text}");
         assert!(

@@ -171,6 +171,12 @@ impl<'a> Integrator<'a> {
         self.strategy
     }
 
+    /// The visibility cache [`Self::learn_visibility`] built (`mis-visibility`),
+    /// for saving it; `None` before, and for other strategies.
+    pub fn visibility_cache(&self) -> Option<&VisibilityCache> {
+        self.visibility.as_ref()
+    }
+
     /// For `mis-visibility`: builds the visibility cache from the first hits of
     /// the camera's rays through the pixel centres of a `width × height` image
     /// and the hits of one cosine-distributed bounce from each,

@@ -51,7 +51,8 @@ pub use geometry::{Camera, Frame, Ray, Shape};
 pub use image::{auto_exposure, encode_image, read_image, write_image, Image, ImageFormat};
 pub use integrator::{Integrator, Scratch};
 pub use render::{
-    render, render_for_time, render_with_error, NoProgress, Progress, RenderSettings, Rendered,
+    learn_visibility, render, render_for_time, render_with_error, render_with_visibility,
+    NoProgress, Progress, RenderSettings, Rendered,
 };
 pub use rgb::Rgb;
 pub use scene::{Material, Object, Scene, SCENE_NAMES};

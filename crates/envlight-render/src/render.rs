@@ -6,7 +6,7 @@ use crate::integrator::Integrator;
 use crate::scene::Scene;
 use crate::strategy::Strategy;
 use envlight::rng::{mix64, SplitMix64};
-use envlight::EnvironmentLight;
+use envlight::{EnvironmentLight, VisibilityCache};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -137,6 +137,20 @@ fn integrator_for<'a>(
     integrator
 }
 
+/// The visibility cache a render with `settings` learns before it traces
+/// (`mis-visibility`'s, from the camera's first hits; `None` for the other
+/// strategies), built alone: the same cache as the render's, the build being a
+/// function of the scene, the light, the image size and the options.
+pub fn learn_visibility(
+    scene: &Scene,
+    light: &EnvironmentLight,
+    settings: &RenderSettings,
+) -> Option<VisibilityCache> {
+    integrator_for(scene, light, settings)
+        .visibility_cache()
+        .cloned()
+}
+
 /// As [`render`], also returning the per-pixel standard error.
 pub fn render_with_error(
     scene: &Scene,
@@ -146,12 +160,39 @@ pub fn render_with_error(
 ) -> Rendered {
     let start = Instant::now();
     let integrator = integrator_for(scene, light, settings);
+    trace_all(scene, &integrator, settings, progress, start)
+}
+
+/// As [`render_with_error`], also returning the visibility cache the render
+/// built and used (`mis-visibility`; `None` for the other strategies), for
+/// saving it ([`VisibilityCache::save`]).
+pub fn render_with_visibility(
+    scene: &Scene,
+    light: &EnvironmentLight,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> (Rendered, Option<VisibilityCache>) {
+    let start = Instant::now();
+    let integrator = integrator_for(scene, light, settings);
+    let rendered = trace_all(scene, &integrator, settings, progress, start);
+    (rendered, integrator.visibility_cache().cloned())
+}
+
+/// Traces `settings.spp` samples of every pixel with `integrator`, the time
+/// counted from `start`.
+fn trace_all(
+    scene: &Scene,
+    integrator: &Integrator,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    start: Instant,
+) -> Rendered {
     let mut sums = vec![PixelSums::default(); settings.width * settings.height];
     let rows = settings.height as u64;
     let done = AtomicU64::new(0);
     trace_pass(
         scene,
-        &integrator,
+        integrator,
         settings,
         0,
         settings.spp,

@@ -199,7 +199,7 @@ fn disc_outline(sun: &envlight::Sun, pw: usize, ph: usize) -> Vec<(usize, usize)
 }
 
 /// The last path component of a map name, for the title.
-fn display_name(name: &str) -> String {
+pub(crate) fn display_name(name: &str) -> String {
     let base = std::path::Path::new(name)
         .file_name()
         .map_or_else(|| name.to_string(), |n| n.to_string_lossy().into_owned());
@@ -207,7 +207,7 @@ fn display_name(name: &str) -> String {
 }
 
 /// A number with about three significant digits, without exponent for moderate values.
-fn short_number(x: f64) -> String {
+pub(crate) fn short_number(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return format!("{x}");
     }
@@ -282,23 +282,9 @@ impl Panels {
         Self { rgb, pdf }
     }
 
-    /// Exposure that puts the median pixel luminance at mid grey (0.18); falls back
-    /// on the mean for maps that are mostly black, and on 1 for black maps.
+    /// [`exposure_of`] the panel.
     fn exposure(&self) -> f32 {
-        let mut y: Vec<f32> = self.rgb.iter().map(|&c| luminance(c)).collect();
-        let mean = y.iter().map(|&v| v as f64).sum::<f64>() / y.len().max(1) as f64;
-        let middle = y.len() / 2;
-        let median = if y.is_empty() {
-            0.0
-        } else {
-            *y.select_nth_unstable_by(middle, f32::total_cmp).1
-        };
-        let key = if median > 0.0 { median as f64 } else { mean };
-        if key > 0.0 && key.is_finite() {
-            (0.18 / key) as f32
-        } else {
-            1.0
-        }
+        exposure_of(&self.rgb)
     }
 
     /// `(log10 min, log10 max)` of the colour scale: the largest pdf down to the
@@ -319,8 +305,27 @@ impl Panels {
     }
 }
 
+/// Exposure that puts the median pixel luminance of `rgb` at mid grey (0.18);
+/// falls back on the mean for maps that are mostly black, and on 1 for black maps.
+pub(crate) fn exposure_of(rgb: &[[f32; 3]]) -> f32 {
+    let mut y: Vec<f32> = rgb.iter().map(|&c| luminance(c)).collect();
+    let mean = y.iter().map(|&v| v as f64).sum::<f64>() / y.len().max(1) as f64;
+    let middle = y.len() / 2;
+    let median = if y.is_empty() {
+        0.0
+    } else {
+        *y.select_nth_unstable_by(middle, f32::total_cmp).1
+    };
+    let key = if median > 0.0 { median as f64 } else { mean };
+    if key > 0.0 && key.is_finite() {
+        (0.18 / key) as f32
+    } else {
+        1.0
+    }
+}
+
 /// Exposure, the ACES filmic fit (Narkowicz 2015), then sRGB encoding.
-fn tone_map(rgb: [f32; 3], exposure: f32) -> [u8; 3] {
+pub(crate) fn tone_map(rgb: [f32; 3], exposure: f32) -> [u8; 3] {
     rgb.map(|c| {
         let x = (c * exposure).max(0.0);
         let mapped = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14);

@@ -12,6 +12,7 @@ pub mod sample;
 pub mod shader;
 pub mod sun;
 pub mod verify;
+pub mod visibility;
 
 /// How a subcommand that did not hit an error ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

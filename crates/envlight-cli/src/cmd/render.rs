@@ -15,7 +15,7 @@ use std::sync::Mutex;
 use anyhow::Context;
 use clap::builder::TypedValueParser as _;
 use envlight_render::{
-    auto_exposure, compare, encode_image, read_image, render_with_error, CompareSettings,
+    auto_exposure, compare, encode_image, read_image, render_with_visibility, CompareSettings,
     ImageFormat, RenderSettings, Scene, Strategy, SCENE_NAMES,
 };
 
@@ -149,6 +149,12 @@ pub struct RenderArgs {
     #[arg(long, value_name = "A", hide = true)]
     visibility_prior: Option<f32>,
 
+    /// mis-visibility: save the visibility cache the render built to FILE (its
+    /// scene key: the scene's name), for `envlight visibility` to inspect. Needs
+    /// --strategy mis-visibility or --compare.
+    #[arg(long, value_name = "FILE", hide = true)]
+    save_visibility: Option<PathBuf>,
+
     /// With --compare, the reference image (.exr or .pfm of the same size) instead of
     /// rendering one.
     #[arg(long, value_name = "FILE", requires = "compare")]
@@ -232,6 +238,34 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         ))
         .into());
     }
+    if let Some(path) = &args.save_visibility {
+        if !args.compare && !args.strategy.uses_visibility() {
+            return Err(UsageError(format!(
+                "--save-visibility {}: only --strategy {} (or --compare) builds a \
+                 visibility cache, not --strategy {}",
+                path.display(),
+                Strategy::MisVisibility,
+                args.strategy
+            ))
+            .into());
+        }
+        // Found now rather than when the finished render cannot be saved.
+        if path.is_dir() {
+            anyhow::bail!(
+                "{}: cannot save the visibility cache: it is a directory",
+                path.display()
+            );
+        }
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                anyhow::bail!(
+                    "{}: cannot save the visibility cache: no folder {}",
+                    path.display(),
+                    dir.display()
+                );
+            }
+        }
+    }
     let scene = Scene::builtin(&args.scene)
         .ok_or_else(|| UsageError(format!("unknown scene '{}'", args.scene)))?;
     let reference = match &args.reference {
@@ -294,6 +328,19 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         };
         let comparison = compare(&scene, &loaded.light, &compare_settings, reference, &bars)?;
         bars.finish();
+        // The comparison's renders keep nothing: the cache is learned again, the
+        // same as theirs (a function of the scene, light, size and options).
+        let saved = match &args.save_visibility {
+            Some(path) => {
+                let settings = RenderSettings {
+                    strategy: Strategy::MisVisibility,
+                    ..settings
+                };
+                let cache = envlight_render::learn_visibility(&scene, &loaded.light, &settings);
+                Some(save_visibility(cache.as_ref(), path, &args.scene)?)
+            }
+            None => None,
+        };
         let exposure = args
             .exposure
             .unwrap_or_else(|| auto_exposure(&comparison.reference));
@@ -304,10 +351,17 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         let mut stdout = Output::create(None)?;
         write!(stdout, "{}", comparison.table()).context("<stdout>: write failed")?;
         writeln!(stdout, "wrote {}", args.output.display()).context("<stdout>: write failed")?;
+        if let Some(line) = saved {
+            writeln!(stdout, "{line}").context("<stdout>: write failed")?;
+        }
         stdout.finish()?;
     } else {
-        let rendered = render_with_error(&scene, &loaded.light, &settings, &bars);
+        let (rendered, cache) = render_with_visibility(&scene, &loaded.light, &settings, &bars);
         bars.finish();
+        let saved = match &args.save_visibility {
+            Some(path) => Some(save_visibility(cache.as_ref(), path, &args.scene)?),
+            None => None,
+        };
         let exposure = args
             .exposure
             .unwrap_or_else(|| auto_exposure(&rendered.image));
@@ -325,12 +379,44 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             args.strategy,
             rendered.seconds
         );
+        if let Some(line) = saved {
+            let _ = writeln!(std::io::stderr().lock(), "{line}");
+        }
     }
     Ok(())
 }
 
+/// The scene key a render saves its visibility cache with: the built-in scene's
+/// name (`room`). Nothing else of a render changes the geometry the cache learned
+/// (the image size only picks the points it learned at; the light is the file's
+/// other key).
+pub fn scene_key(scene: &str) -> String {
+    scene.to_string()
+}
+
+/// Saves `cache` (the one a mis-visibility render built) to `path` under the key
+/// of `scene`, and says so in a line for the user.
+fn save_visibility(
+    cache: Option<&envlight::VisibilityCache>,
+    path: &std::path::Path,
+    scene: &str,
+) -> anyhow::Result<String> {
+    let cache = cache
+        .with_context(|| format!("{}: no visibility cache was built to save", path.display()))?;
+    let key = scene_key(scene);
+    cache
+        .save(path, &key)
+        .context("cannot save the visibility cache")?;
+    let summary = cache.summary();
+    Ok(format!(
+        "wrote {} (visibility cache: {} entries, scene key {key:?})",
+        path.display(),
+        summary.entries
+    ))
+}
+
 /// `PWxPH` as two positive counts.
-fn parse_patches(text: &str) -> Result<[usize; 2], String> {
+pub(crate) fn parse_patches(text: &str) -> Result<[usize; 2], String> {
     let parse = |t: &str| t.trim().parse::<usize>().ok().filter(|&n| n > 0);
     match text.split_once(['x', 'X']) {
         Some((a, b)) => match (parse(a), parse(b)) {

@@ -152,64 +152,25 @@ impl VisibilityCache {
             at: 0,
             source_name,
         };
-        if r.take(8)? != MAGIC {
-            return Err(r.bad("not a visibility cache (no envlvis magic)".into()));
-        }
-        let version = r.u32()?;
-        if version != FILE_VERSION {
-            return Err(r.bad(format!(
-                "version {version}, this library reads {FILE_VERSION}"
-            )));
-        }
-        let saved_hash = r.u64()?;
-        let key_len = r.u32()? as usize;
-        if key_len > MAX_SCENE_KEY {
-            return Err(r.bad(format!(
-                "scene key of {key_len} bytes (at most {MAX_SCENE_KEY})"
-            )));
-        }
-        let saved_key = std::str::from_utf8(r.take(key_len)?)
-            .map_err(|_| r.bad("the scene key is not UTF-8".into()))?
-            .to_string();
+        let (saved, options) = read_header(&mut r)?;
         let hash = light_hash(&product);
-        if saved_hash != hash || saved_key != scene_key {
+        if saved.light_hash != hash || saved.scene_key != scene_key {
             return Err(Error::Mismatch {
                 source_name: source_name.to_string(),
                 detail: format!(
-                    "made for light {saved_hash:016x} in scene {saved_key:?}, \
-                     asked for light {hash:016x} in scene {scene_key:?}"
+                    "made for light {:016x} in scene {:?}, \
+                     asked for light {hash:016x} in scene {scene_key:?}",
+                    saved.light_hash, saved.scene_key
                 ),
             });
         }
-        let radius = r.f32()?;
-        let options = VisibilityOptions {
-            radius: Some(radius),
-            normal_bins: r.u32()? as usize,
-            target_entries: r.u64()? as usize,
-            memory_budget: r.u64()? as usize,
-            rays_per_patch: r.u32()? as usize,
-            refine_rays: r.u32()? as usize,
-            learned_share: r.f32()?,
-            prior: r.f32()?,
-            seed: r.u64()?,
-        };
-        super::check_options::<std::convert::Infallible>(&options)
-            .map_err(|e| r.bad(e.to_string()))?;
-        let patches = r.u32()? as usize;
+        let (patches, rays, count, radius) =
+            (saved.patches, saved.rays, saved.entries, saved.radius);
         let view = product.patches_view();
         if patches != view.count() {
             return Err(r.bad(format!(
                 "{patches} patches, the light's sampler has {}",
                 view.count()
-            )));
-        }
-        let rays = r.u64()?;
-        let count = r.u32()? as usize;
-        let per_entry = 24 + 4 * patches;
-        if count.checked_mul(per_entry) != Some(r.left()) {
-            return Err(r.bad(format!(
-                "{count} entries of {per_entry} bytes declared, {} bytes follow",
-                r.left()
             )));
         }
         let mut keys = Vec::with_capacity(count);
@@ -298,5 +259,168 @@ impl<'a> Reader<'a> {
 
     fn f32(&mut self) -> Result<f32> {
         self.array().map(f32::from_le_bytes)
+    }
+}
+
+/// What a saved cache's header says it was made for, read without the light:
+/// see [`read_keys`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SavedKeys {
+    /// The [`light_hash`] of the light it was learned under.
+    pub light_hash: u64,
+    /// The scene key it was saved with.
+    pub scene_key: String,
+    /// The cells' side, world units.
+    pub radius: f32,
+    /// Patches of the product sampler's fine level (`Pw · Ph`).
+    pub patches: usize,
+    /// Entries held.
+    pub entries: usize,
+    /// Rays traced to build it.
+    pub rays: u64,
+}
+
+/// Reads the keys of a cache saved by [`VisibilityCache::save`] from the file's
+/// bytes, without the light: for a front end to say what a file was made for
+/// before it builds (or to find that it cannot build) the light that
+/// [`VisibilityCache::load`] needs. The header is checked as the loader checks
+/// it, and the entries' size against the bytes that follow; the entries
+/// themselves are not read. `source_name` names the file in errors.
+///
+/// # Errors
+/// [`Error::Decode`] for a file that is not a well-formed cache header, or
+/// whose length does not match its entries.
+pub fn read_keys(bytes: &[u8], source_name: &str) -> Result<SavedKeys> {
+    let mut r = Reader {
+        bytes,
+        at: 0,
+        source_name,
+    };
+    read_header(&mut r).map(|(keys, _)| keys)
+}
+
+/// The header up to the first entry, checked (magic, version, key length,
+/// options in range, the entries' bytes against what follows), with the
+/// options it records; `r` is left at the first entry.
+fn read_header(r: &mut Reader<'_>) -> Result<(SavedKeys, VisibilityOptions)> {
+    if r.take(8)? != MAGIC {
+        return Err(r.bad("not a visibility cache (no envlvis magic)".into()));
+    }
+    let version = r.u32()?;
+    if version != FILE_VERSION {
+        return Err(r.bad(format!(
+            "version {version}, this library reads {FILE_VERSION}"
+        )));
+    }
+    let light_hash = r.u64()?;
+    let key_len = r.u32()? as usize;
+    if key_len > MAX_SCENE_KEY {
+        return Err(r.bad(format!(
+            "scene key of {key_len} bytes (at most {MAX_SCENE_KEY})"
+        )));
+    }
+    let scene_key = std::str::from_utf8(r.take(key_len)?)
+        .map_err(|_| r.bad("the scene key is not UTF-8".into()))?
+        .to_string();
+    let radius = r.f32()?;
+    let options = VisibilityOptions {
+        radius: Some(radius),
+        normal_bins: r.u32()? as usize,
+        target_entries: r.u64()? as usize,
+        memory_budget: r.u64()? as usize,
+        rays_per_patch: r.u32()? as usize,
+        refine_rays: r.u32()? as usize,
+        learned_share: r.f32()?,
+        prior: r.f32()?,
+        seed: r.u64()?,
+    };
+    super::check_options::<std::convert::Infallible>(&options).map_err(|e| r.bad(e.to_string()))?;
+    let patches = r.u32()? as usize;
+    let rays = r.u64()?;
+    let entries = r.u32()? as usize;
+    let per_entry = 24 + 4 * patches;
+    if entries.checked_mul(per_entry) != Some(r.left()) {
+        return Err(r.bad(format!(
+            "{entries} entries of {per_entry} bytes declared, {} bytes follow",
+            r.left()
+        )));
+    }
+    let keys = SavedKeys {
+        light_hash,
+        scene_key,
+        radius,
+        patches,
+        entries,
+        rays,
+    };
+    Ok((keys, options))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{builtin, LightOptions, ProductOptions};
+
+    /// A cache of a few points on a floor under an open sky, built and saved.
+    fn saved() -> (VisibilityCache, Vec<u8>) {
+        let light = EnvironmentLight::new(builtin::sky(32, 16), LightOptions::default()).unwrap();
+        let options = ProductOptions {
+            patches: Some([8, 4]),
+            ..Default::default()
+        };
+        let product = Arc::new(ProductSampler::new(Arc::new(light), options));
+        let points: Vec<Vec3> = (0..16)
+            .map(|i| Vec3::new((i % 4) as f32, (i / 4) as f32, 0.0))
+            .collect();
+        let normals = vec![Vec3::new(0.0, 0.0, 1.0); points.len()];
+        let cache = VisibilityCache::build(
+            product,
+            &points,
+            &normals,
+            &VisibilityOptions::default(),
+            |_: &[Vec3], _: &[Vec3], t: &mut [f32]| {
+                t.fill(0.5);
+                Ok::<(), std::convert::Infallible>(())
+            },
+        )
+        .unwrap();
+        let bytes = cache.to_bytes("floor v1").unwrap();
+        (cache, bytes)
+    }
+
+    #[test]
+    fn visibility_keys_are_read_without_the_light() {
+        let (cache, bytes) = saved();
+        let keys = read_keys(&bytes, "floor.envlvis").unwrap();
+        let summary = cache.summary();
+        assert_eq!(keys.light_hash, light_hash(cache.product()));
+        assert_eq!(keys.scene_key, "floor v1");
+        assert_eq!(keys.radius, summary.radius);
+        assert_eq!(keys.entries, summary.entries);
+        assert_eq!(keys.rays, summary.rays);
+        assert_eq!(keys.patches, 32);
+        assert!(keys.entries > 0 && keys.rays > 0);
+    }
+
+    #[test]
+    fn visibility_keys_of_a_damaged_file_are_errors_naming_it() {
+        let (_, bytes) = saved();
+        let mut wrong_magic = bytes.clone();
+        wrong_magic[0] = b'E';
+        let mut wrong_version = bytes.clone();
+        wrong_version[8] = 9;
+        for (damaged, needle) in [
+            (&bytes[..5], "truncated"),
+            (&bytes[..40], "truncated"),
+            (&bytes[..bytes.len() - 1], "bytes follow"),
+            (&wrong_magic[..], "magic"),
+            (&wrong_version[..], "version 9"),
+        ] {
+            let e = read_keys(damaged, "floor.envlvis").unwrap_err();
+            let text = e.to_string();
+            assert!(matches!(e, Error::Decode { .. }), "{text}");
+            assert!(text.contains("floor.envlvis"), "{text}");
+            assert!(text.contains(needle), "{needle}: {text}");
+        }
     }
 }

@@ -346,8 +346,9 @@ pub(crate) fn entry(
     // `V̄`, the share of the light the entry faces that it sees: where it sees
     // all of it the product sampler (whose tables follow each normal closely)
     // is the better sampler; the less it sees, the more the learned one wins.
+    let seen_share = if facing > 0.0 { seen / facing } else { 1.0 };
     let share = if distribution.integral() > 0.0 && facing > 0.0 {
-        (options.learned_share as f64 * (1.0 - seen / facing)).clamp(0.0, 1.0) as f32
+        (options.learned_share as f64 * (1.0 - seen_share)).clamp(0.0, 1.0) as f32
     } else {
         0.0
     };
@@ -355,6 +356,7 @@ pub(crate) fn entry(
         normal,
         cos_spread,
         share,
+        seen: seen_share as f32,
         visibility,
         patches: distribution,
     }

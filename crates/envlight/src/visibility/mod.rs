@@ -52,7 +52,7 @@ mod entries;
 mod file;
 mod learn;
 
-pub use file::{light_hash, FILE_VERSION, MAX_SCENE_KEY};
+pub use file::{light_hash, read_keys, SavedKeys, FILE_VERSION, MAX_SCENE_KEY};
 
 use crate::distribution::Distribution1D;
 use crate::light::{solid_angle_density, LightSample};
@@ -148,6 +148,9 @@ pub(crate) struct Entry {
     pub cos_spread: f32,
     /// `α_e`: the learned distribution's share (0 when it faces no lit patch).
     pub share: f32,
+    /// `V̄_e`: the share of the light it faces that it sees (1 when it faces
+    /// no lit patch).
+    pub seen: f32,
     /// `V̂_e[k]` per patch (1 for a patch it cannot face, never traced).
     pub visibility: Vec<f32>,
     /// `π_e`: the distribution over patches, from `W_e`.
@@ -178,8 +181,9 @@ pub struct VisibilitySummary {
     pub bytes: usize,
     /// The cells' side, world units.
     pub radius: f32,
-    /// The light-weighted mean visibility over entries, `Σ_k P_k V̂_e[k]` averaged
-    /// over entries (over the patches each can face).
+    /// The mean over entries of `V̄_e`, the share of the light an entry faces
+    /// that it sees (`Σ_k V̂_e[k] P_k C_e[k] / Σ_k P_k C_e[k]`, module docs); 0
+    /// without entries.
     pub mean_visibility: f64,
     /// Rays traced to build it.
     pub rays: u64,
@@ -255,26 +259,10 @@ impl VisibilityCache {
 
     /// Entries, bytes, radius and mean visibility.
     pub fn summary(&self) -> VisibilitySummary {
-        let patches = self.product.patches_view();
         let mean = if self.entries.is_empty() {
             0.0
         } else {
-            self.entries
-                .iter()
-                .map(|e| {
-                    let (mut seen, mut total) = (0.0, 0.0);
-                    for (k, &v) in e.visibility.iter().enumerate() {
-                        seen += patches.power(k) * v as f64;
-                        total += patches.power(k);
-                    }
-                    if total > 0.0 {
-                        seen / total
-                    } else {
-                        0.0
-                    }
-                })
-                .sum::<f64>()
-                / self.entries.len() as f64
+            self.entries.iter().map(|e| e.seen as f64).sum::<f64>() / self.entries.len() as f64
         };
         VisibilitySummary {
             entries: self.entries.len(),
