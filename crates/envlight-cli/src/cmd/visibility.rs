@@ -190,6 +190,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
                 "target_entries": options.target_entries,
                 "memory_budget": options.memory_budget,
                 "rays_per_patch": options.rays_per_patch,
+                "refine_rays": options.refine_rays,
                 "learned_share": options.learned_share,
                 "prior": options.prior,
                 "seed": options.seed,
@@ -238,7 +239,7 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             (
                 "mean vis",
                 format!(
-                    "{:.4} (the light-weighted mean of an entry's estimates, over entries)",
+                    "{:.4} (per entry the share of the light it faces that it sees, averaged)",
                     summary.mean_visibility
                 ),
             ),
@@ -246,9 +247,11 @@ pub fn run(args: &Args) -> anyhow::Result<Outcome> {
             (
                 "options",
                 format!(
-                    "normal bins {}, rays per patch {}, learned share {}, prior {}",
+                    "normal bins {}, rays per patch {} then {} per edge patch, learned share {}, \
+                     prior {}",
                     options.normal_bins,
                     options.rays_per_patch,
+                    options.refine_rays,
                     options.learned_share,
                     options.prior
                 ),
