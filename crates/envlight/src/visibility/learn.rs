@@ -13,11 +13,16 @@ use crate::product::ProductSampler;
 use crate::rng::{mix64, SplitMix64};
 use rayon::prelude::*;
 
-/// An entry whose probe (one ray per patch) saw at least this share of the
+/// An entry whose probe (one ray in one patch of four) saw at least this share of the
 /// light it faces is nearly open: its learned share `α (1 − V̄_e)` stays small,
 /// the product sampler serves it, and it gets no more rays. In the open scenes
 /// this cuts the build's rays fourfold.
 const NEARLY_OPEN: f64 = 0.9;
+
+/// The smallest learned share an entry samples with; below it the entry
+/// samples the product sampler alone (in the open scenes most entries: their
+/// `V̄_e` is above 0.95).
+const MIN_LEARNED_SHARE: f32 = 0.05;
 
 /// Entries whose rays are drawn at once (in parallel) before they are traced.
 const ENTRIES_AT_ONCE: usize = 64;
@@ -34,6 +39,11 @@ pub(crate) struct Learned {
 
 /// An entry while its rays are traced.
 struct Pending {
+    /// Whether its probe found it nearly open ([`NEARLY_OPEN`]).
+    open: bool,
+    /// `Σ_k P_k C_e[k]` over the patches it can face, and how many those are.
+    facing: f64,
+    faceable: usize,
     normal: Vec3,
     cos_spread: f32,
     /// `C_e[k]`: 0 for a patch it cannot face (or without power).
@@ -66,7 +76,12 @@ pub(crate) fn learn<E>(
         .map(|group| {
             let (normal, cos_spread) = mean_normal(group, normals);
             let bound = cosine_bounds(&patches, normal, cos_spread);
+            let facing = (0..count).map(|k| patches.power(k) * bound[k] as f64).sum();
+            let faceable = bound.iter().filter(|&&b| b > 0.0).count();
             Pending {
+                open: false,
+                facing,
+                faceable,
                 normal,
                 cos_spread,
                 bound,
@@ -87,7 +102,9 @@ pub(crate) fn learn<E>(
     // names. The rays of a few entries at a time are drawn in parallel (each
     // entry from its own generator, so the rays do not depend on the threads),
     // then traced in batches in entry order.
-    let mut pass = |seed: u64, plan: &(dyn Fn(&Pending) -> Vec<usize> + Sync), rays_each: usize| {
+    let mut pass = |pending: &mut [Pending],
+                    seed: u64,
+                    plan: &(dyn Fn(&Pending) -> Vec<(usize, usize)> + Sync)| {
         let mut rays = 0u64;
         for first in (0..groups.len()).step_by(ENTRIES_AT_ONCE) {
             let last = (first + ENTRIES_AT_ONCE).min(groups.len());
@@ -97,7 +114,8 @@ pub(crate) fn learn<E>(
                     let mut rng = SplitMix64::new(mix64(seed ^ mix64(e as u64)));
                     let group = &groups[e];
                     let mut out = Vec::new();
-                    for k in plan(&pending[e]) {
+                    let shared: &[Pending] = pending;
+                    for (k, rays_each) in plan(&shared[e]) {
                         for _ in 0..rays_each {
                             if let Some(ray) =
                                 draw_ray(group, points, normals, &patches, k, &mut rng)
@@ -115,34 +133,54 @@ pub(crate) fn learn<E>(
                     batch.directions.push(ray.direction);
                     batch.owners.push((e as u32, ray.patch));
                     if batch.origins.len() == BATCH {
-                        rays += batch.flush(&mut pending, &mut trace)?;
+                        rays += batch.flush(pending, &mut trace)?;
                     }
                 }
             }
         }
-        rays += batch.flush(&mut pending, &mut trace)?;
+        rays += batch.flush(pending, &mut trace)?;
         Ok::<u64, VisibilityError<E>>(rays)
     };
-    // A probe: one ray towards every lit patch each entry can face.
-    let mut rays = pass(options.seed, &|p| p.faceable().collect(), 1)?;
+    // A probe: one ray towards every other lit patch (across and down) each
+    // entry can face.
+    let probe = |p: &Pending| p.probed(&patches, &grid).map(|(k, _)| (k, 1)).collect();
+    let mut rays = pass(&mut pending, options.seed, &probe)?;
     // The rest of the first pass, and the second, only for the entries the
     // probe did not find nearly open: the others' learned share stays small.
-    let open = |p: &Pending| p.seen_share(&patches) >= NEARLY_OPEN;
-    if options.rays_per_patch > 1 {
-        let plan = |p: &Pending| {
-            if open(p) {
-                Vec::new()
-            } else {
-                p.faceable().collect()
-            }
-        };
-        rays += pass(mix64(options.seed ^ 1), &plan, options.rays_per_patch - 1)?;
+    let open: Vec<bool> = pending
+        .iter()
+        .map(|p| p.probe_seen_share(&patches, &grid) >= NEARLY_OPEN)
+        .collect();
+    for (p, open) in pending.iter_mut().zip(open) {
+        p.open = open;
     }
+    let open = |p: &Pending| p.open;
+    let probed = |p: &Pending, k: usize| grid.is_probed(k) || p.is_heavy(&patches, k);
+    let rest = |p: &Pending| {
+        if open(p) {
+            return Vec::new();
+        }
+        let m = options.rays_per_patch;
+        p.faceable()
+            .map(|k| (k, if probed(p, k) { m - 1 } else { m }))
+            .filter(|&(_, n)| n > 0)
+            .collect()
+    };
+    rays += pass(&mut pending, mix64(options.seed ^ 1), &rest)?;
     // The second pass: more rays where the first saw an edge of what the entry
     // sees.
     if options.refine_rays > 0 {
-        let plan = |p: &Pending| if open(p) { Vec::new() } else { p.edges(&grid) };
-        rays += pass(mix64(options.seed ^ 2), &plan, options.refine_rays)?;
+        let edges = |p: &Pending| {
+            if open(p) {
+                Vec::new()
+            } else {
+                p.edges(&grid)
+                    .into_iter()
+                    .map(|k| (k, options.refine_rays))
+                    .collect()
+            }
+        };
+        rays += pass(&mut pending, mix64(options.seed ^ 2), &edges)?;
     }
 
     let entries = pending
@@ -196,6 +234,13 @@ impl Neighbours {
         }
     }
 
+    /// Whether the probe traces patch `k` if it is not heavy: one patch in each
+    /// 2 × 2 block.
+    fn is_probed(&self, k: usize) -> bool {
+        let w = self.size[0];
+        (k % w) % 2 == 0 && (k / w) % 2 == 0
+    }
+
     /// The patches sharing a side with patch `k`.
     fn around(&self, k: usize) -> impl Iterator<Item = usize> {
         let [w, h] = self.size;
@@ -222,13 +267,37 @@ impl Pending {
         (0..self.bound.len()).filter(|&k| self.bound[k] > 0.0)
     }
 
-    /// The share of the light the entry faces that its rays so far saw
-    /// (`Σ t̄_k P_k C_e[k] / Σ P_k C_e[k]` over the patches traced; 1 if none).
-    fn seen_share(&self, patches: &Patches<'_>) -> f64 {
+    /// Whether patch `k` carries at least the mean weight `P_k C_e[k]` of the
+    /// patches the entry can face: the probe traces every such patch (a sun
+    /// must not fall between the probe's patches).
+    fn is_heavy(&self, patches: &Patches<'_>, k: usize) -> bool {
+        patches.power(k) * self.bound[k] as f64 * self.faceable as f64 >= self.facing
+    }
+
+    /// The probe's patches, each with its inverse inclusion rate: every heavy
+    /// patch (1), and one other in each 2 × 2 block of the grid (4).
+    fn probed<'a>(
+        &'a self,
+        patches: &'a Patches<'_>,
+        grid: &'a Neighbours,
+    ) -> impl Iterator<Item = (usize, f64)> + 'a {
+        self.faceable().filter_map(move |k| {
+            if self.is_heavy(patches, k) {
+                Some((k, 1.0))
+            } else {
+                grid.is_probed(k).then_some((k, 4.0))
+            }
+        })
+    }
+
+    /// The share of the light the entry faces that its probe saw, each
+    /// patch's `P_k C_e[k]` weighted by its inverse inclusion rate (so the
+    /// sampled patches stand for those skipped); 1 if it traced nothing.
+    fn probe_seen_share(&self, patches: &Patches<'_>, grid: &Neighbours) -> f64 {
         let (mut seen, mut facing) = (0.0f64, 0.0f64);
-        for k in 0..self.bound.len() {
+        for (k, rate) in self.probed(patches, grid) {
             if self.count[k] > 0 {
-                let w = patches.power(k) * self.bound[k] as f64;
+                let w = rate * patches.power(k) * self.bound[k] as f64;
                 facing += w;
                 seen += w * (self.sum[k] / self.count[k] as f32) as f64;
             }
@@ -353,6 +422,13 @@ pub(crate) fn entry(
         (options.learned_share as f64 * (1.0 - seen_share)).clamp(0.0, 1.0) as f32
     } else {
         0.0
+    };
+    // Below `MIN_LEARNED_SHARE` the learned part would move the density by
+    // less than that share anywhere: not worth its pdf at every sample.
+    let share = if share < MIN_LEARNED_SHARE {
+        0.0
+    } else {
+        share
     };
     Entry {
         normal,
