@@ -238,7 +238,7 @@ impl Neighbours {
     /// 2 × 2 block.
     fn is_probed(&self, k: usize) -> bool {
         let w = self.size[0];
-        (k % w) % 2 == 0 && (k / w) % 2 == 0
+        (k % w).is_multiple_of(2) && (k / w).is_multiple_of(2)
     }
 
     /// The patches sharing a side with patch `k`.
