@@ -420,19 +420,21 @@ impl<'a> Integrator<'a> {
             let factor = bsdf.product_factor(normal, -ray.direction);
             // `mis-visibility`: the cache's mixture where `mis-product` would take
             // product samples, but at near-mirror metals (whose lobe, not the
-            // sky's visibility, decides where light comes from). It holds its own
-            // product shading point.
-            let seen_point = match &self.visibility {
-                Some(cache) if !light_here && bsdf.conductor_roughness().is_none() => {
-                    Some(cache.at(hit.point, &factor))
+            // sky's visibility, decides where light comes from). It mixes with
+            // this thread's product shading point.
+            let uses_cache =
+                self.visibility.is_some() && !light_here && bsdf.conductor_roughness().is_none();
+            let product_here = !light_here && !uses_cache;
+            if let (Some(point), true) = (scratch.point.as_mut(), !light_here) {
+                point.set_factor(&factor);
+            }
+            let seen_point = match (&self.visibility, scratch.point.as_ref()) {
+                (Some(cache), Some(point)) if uses_cache => {
+                    Some(cache.at_point(hit.point, &factor, point))
                 }
                 _ => None,
             };
             let seen = seen_point.as_ref();
-            let product_here = !light_here && seen.is_none();
-            if let (Some(point), true) = (scratch.point.as_mut(), product_here) {
-                point.set_factor(&factor);
-            }
             let point = scratch.point.as_ref().filter(|_| product_here);
             // The portals as seen from this vertex (their windows and powers; on the
             // stack, no allocation).

@@ -726,6 +726,11 @@ impl ShadingPoint<'_> {
         self.factor.as_ref()
     }
 
+    /// The sampler this point belongs to.
+    pub fn sampler(&self) -> &ProductSampler {
+        self.sampler
+    }
+
     /// True when this point samples something: the factor is valid and some table
     /// it mixes has weight. False means that no patch the factor can see (with
     /// the tables' bounds) is lit: then the pdf is 0 everywhere and so is `L f`.

@@ -305,7 +305,53 @@ impl VisibilityCache {
         VisibilityPoint {
             cache: self,
             entry,
-            point: self.product.at(factor),
+            point: Held::Owned(self.product.at(factor)),
+        }
+    }
+
+    /// [`Self::at`] with the caller's own shading point of this cache's
+    /// product sampler, `point`, already set to `factor`
+    /// ([`ShadingPoint::set_factor`]): no allocation, for a renderer that keeps
+    /// one shading point per thread.
+    ///
+    /// # Panics
+    /// In debug builds, when `point` belongs to another product sampler.
+    pub fn at_point<'a>(
+        &'a self,
+        position: Vec3,
+        factor: &Factor,
+        point: &'a ShadingPoint<'a>,
+    ) -> VisibilityPoint<'a> {
+        debug_assert!(
+            std::ptr::eq(point.sampler(), &*self.product),
+            "the shading point belongs to another product sampler"
+        );
+        let entry = self
+            .entry_of(position, factor.normal())
+            .map(|e| &self.entries[e])
+            .filter(|e| e.share > 0.0);
+        VisibilityPoint {
+            cache: self,
+            entry,
+            point: Held::Shared(point),
+        }
+    }
+}
+
+/// The product's shading point of a [`VisibilityPoint`]: its own, or the
+/// caller's.
+#[derive(Debug, Clone)]
+enum Held<'a> {
+    Owned(ShadingPoint<'a>),
+    Shared(&'a ShadingPoint<'a>),
+}
+
+impl<'a> Held<'a> {
+    #[inline]
+    fn get(&self) -> &ShadingPoint<'a> {
+        match self {
+            Held::Owned(p) => p,
+            Held::Shared(p) => p,
         }
     }
 }
@@ -315,7 +361,7 @@ impl VisibilityCache {
 pub struct VisibilityPoint<'a> {
     cache: &'a VisibilityCache,
     entry: Option<&'a Entry>,
-    point: ShadingPoint<'a>,
+    point: Held<'a>,
 }
 
 impl VisibilityPoint<'_> {
@@ -330,7 +376,7 @@ impl VisibilityPoint<'_> {
     /// or the draw has density 0 (a null set).
     pub fn sample(&self, xi: [f32; 2]) -> Option<LightSample> {
         let Some(entry) = self.entry else {
-            return self.point.sample(xi);
+            return self.point.get().sample(xi);
         };
         let share = entry.share;
         let x = xi[0].max(0.0);
@@ -350,7 +396,7 @@ impl VisibilityPoint<'_> {
             }
         } else {
             let rest = ((x - share) / (1.0 - share)).min(crate::distribution::ONE_MINUS_EPSILON);
-            self.point.sample([rest, xi[1]])?
+            self.point.get().sample([rest, xi[1]])?
         };
         let pdf = self.pdf(drawn.direction);
         (pdf > 0.0 && pdf.is_finite()).then_some(LightSample { pdf, ..drawn })
@@ -360,7 +406,7 @@ impl VisibilityPoint<'_> {
     /// steradian: `α_e q_e(ω) + (1 − α_e) p_prod(ω | n)`.
     #[inline]
     pub fn pdf(&self, direction: Vec3) -> f32 {
-        let product = self.point.pdf(direction);
+        let product = self.point.get().pdf(direction);
         let Some(entry) = self.entry else {
             return product;
         };
