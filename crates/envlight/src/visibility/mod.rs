@@ -305,7 +305,7 @@ impl VisibilityCache {
         VisibilityPoint {
             cache: self,
             entry,
-            point: Held::Owned(self.product.at(factor)),
+            point: Held::Owned(Box::new(self.product.at(factor))),
         }
     }
 
@@ -342,7 +342,7 @@ impl VisibilityCache {
 /// caller's.
 #[derive(Debug, Clone)]
 enum Held<'a> {
-    Owned(ShadingPoint<'a>),
+    Owned(Box<ShadingPoint<'a>>),
     Shared(&'a ShadingPoint<'a>),
 }
 
