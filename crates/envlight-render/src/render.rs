@@ -42,7 +42,7 @@ impl Default for RenderSettings {
             height: 360,
             spp: 64,
             max_depth: 8,
-            strategy: Strategy::Mis,
+            strategy: Strategy::MisVisibility,
             seed: 0,
             product: envlight::ProductOptions::default(),
             visibility: envlight::VisibilityOptions::default(),

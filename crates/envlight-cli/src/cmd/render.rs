@@ -67,7 +67,7 @@ pub struct RenderArgs {
     spp: u32,
 
     /// How the light is estimated at each vertex.
-    #[arg(long, value_name = "S", default_value = "mis",
+    #[arg(long, value_name = "S", default_value = "mis-visibility",
           value_parser = clap::builder::PossibleValuesParser::new(Strategy::ALL.map(Strategy::name))
               .map(|s| s.parse::<Strategy>().unwrap_or_default()))]
     strategy: Strategy,
