@@ -23,45 +23,8 @@
 
 #include "envlight.h"
 
-static void fail(const char *what) {
-    char message[512];
-    envlight_last_error(message, sizeof message);
-    fprintf(stderr, "rows: %s: %s\n", what, message);
-    exit(1);
-}
-
-static void *read_file(const char *path, size_t *size) {
-    FILE *f = fopen(path, "rb");
-    char *data;
-    long n;
-    if (!f) {
-        fprintf(stderr, "rows: cannot open %s\n", path);
-        exit(1);
-    }
-    fseek(f, 0, SEEK_END);
-    n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    data = malloc((size_t)n + 1);
-    if (!data || fread(data, 1, (size_t)n, f) != (size_t)n) {
-        fprintf(stderr, "rows: cannot read %s\n", path);
-        exit(1);
-    }
-    fclose(f);
-    *size = (size_t)n;
-    return data;
-}
-
-static uint32_t bits(float x) {
-    uint32_t b;
-    memcpy(&b, &x, sizeof b);
-    return b;
-}
-
-static uint64_t bits64(double x) {
-    uint64_t b;
-    memcpy(&b, &x, sizeof b);
-    return b;
-}
+#define PROGRAM "rows"
+#include "common.h"
 
 /* Every row of one pass, as 32-bit words, to compare passes exactly. */
 typedef struct {

@@ -13,30 +13,14 @@
 #include <vector>
 
 #include "envlight.hpp"
+#include "common.hpp"
 
 namespace {
 
-std::vector<char> read_file(const char *path) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw std::runtime_error(std::string("cannot open ") + path);
-    return std::vector<char>(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-}
+using test_common::bits;
+using test_common::open;
+using test_common::read_file;
 
-std::uint32_t bits(float x) {
-    std::uint32_t b;
-    std::memcpy(&b, &x, sizeof b);
-    return b;
-}
-
-envlight::light open(const char *map) {
-    if (std::strncmp(map, "raw:", 4) != 0) return envlight::light::load(map);
-    std::vector<char> raw = read_file(map + 4);
-    std::uint32_t wh[2];
-    std::memcpy(wh, raw.data(), sizeof wh);
-    std::vector<float> rgb(static_cast<std::size_t>(wh[0]) * wh[1] * 3);
-    std::memcpy(rgb.data(), raw.data() + 8, rgb.size() * sizeof(float));
-    return envlight::light::from_rgb(rgb, wh[0], wh[1]);
-}
 
 }  // namespace
 

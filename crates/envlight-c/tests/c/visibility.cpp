@@ -17,36 +17,15 @@
 #include <vector>
 
 #include "envlight.hpp"
+#include "common.hpp"
 
 namespace {
 
-std::vector<char> read_file(const char *path) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw std::runtime_error(std::string("cannot open ") + path);
-    return std::vector<char>(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-}
+using test_common::bits;
+using test_common::bits64;
+using test_common::open;
+using test_common::read_file;
 
-std::uint32_t bits(float x) {
-    std::uint32_t b;
-    std::memcpy(&b, &x, sizeof b);
-    return b;
-}
-
-std::uint64_t bits64(double x) {
-    std::uint64_t b;
-    std::memcpy(&b, &x, sizeof b);
-    return b;
-}
-
-envlight::light open(const char *map) {
-    if (std::strncmp(map, "raw:", 4) != 0) return envlight::light::load(map);
-    std::vector<char> raw = read_file(map + 4);
-    std::uint32_t wh[2];
-    std::memcpy(wh, raw.data(), sizeof wh);
-    std::vector<float> rgb(static_cast<std::size_t>(wh[0]) * wh[1] * 3);
-    std::memcpy(rgb.data(), raw.data() + 8, rgb.size() * sizeof(float));
-    return envlight::light::from_rgb(rgb, wh[0], wh[1]);
-}
 
 float exit_time(float o, float d, float lo, float hi) {
     if (d > 0.0f) return (hi - o) / d;

@@ -298,13 +298,9 @@ impl VisibilityCache {
     /// normal picks the entry). `O(1)`: one hash lookup and the product's
     /// [`ProductSampler::at`].
     pub fn at(&self, position: Vec3, factor: &Factor) -> VisibilityPoint<'_> {
-        let entry = self
-            .entry_of(position, factor.normal())
-            .map(|e| &self.entries[e])
-            .filter(|e| e.share > 0.0);
         VisibilityPoint {
             cache: self,
-            entry,
+            entry: self.learned_entry(position, factor),
             point: Held::Owned(Box::new(self.product.at(factor))),
         }
     }
@@ -326,15 +322,20 @@ impl VisibilityCache {
             std::ptr::eq(point.sampler(), &*self.product),
             "the shading point belongs to another product sampler"
         );
-        let entry = self
-            .entry_of(position, factor.normal())
-            .map(|e| &self.entries[e])
-            .filter(|e| e.share > 0.0);
         VisibilityPoint {
             cache: self,
-            entry,
+            entry: self.learned_entry(position, factor),
             point: Held::Shared(point),
         }
+    }
+
+    /// The entry of `(position, factor's normal)` if it samples with a
+    /// learned share.
+    #[inline]
+    fn learned_entry(&self, position: Vec3, factor: &Factor) -> Option<&Entry> {
+        self.entry_of(position, factor.normal())
+            .map(|e| &self.entries[e])
+            .filter(|e| e.share > 0.0)
     }
 }
 
