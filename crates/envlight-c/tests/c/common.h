@@ -51,4 +51,22 @@ static inline uint64_t bits64(double x) {
     return b;
 }
 
+/* The light of MAP: a file the library loads, or `raw:FILE`, a dump of width
+ * and height (two u32) and RGB floats. */
+static inline envlight_light *open_light(const char *map) {
+    envlight_light *light = NULL;
+    if (strncmp(map, "raw:", 4) == 0) {
+        size_t size;
+        char *raw = read_file(map + 4, &size);
+        uint32_t wh[2];
+        memcpy(wh, raw, sizeof wh);
+        if (envlight_light_from_rgb((const float *)(raw + 8), wh[0], wh[1], NULL, &light) != ENVLIGHT_OK)
+            fail("envlight_light_from_rgb");
+        free(raw);
+    } else if (envlight_light_load(map, NULL, &light) != ENVLIGHT_OK) {
+        fail("envlight_light_load");
+    }
+    return light;
+}
+
 #endif

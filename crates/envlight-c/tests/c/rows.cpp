@@ -21,7 +21,6 @@ using test_common::bits;
 using test_common::open;
 using test_common::read_file;
 
-
 }  // namespace
 
 int main(int argc, char **argv) {

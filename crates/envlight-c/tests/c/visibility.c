@@ -163,16 +163,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: visibility MAP INPUTS DIR\n");
         return 2;
     }
-    if (strncmp(argv[1], "raw:", 4) == 0) {
-        char *raw = read_file(argv[1] + 4, &size);
-        uint32_t wh[2];
-        memcpy(wh, raw, sizeof wh);
-        if (envlight_light_from_rgb((const float *)(raw + 8), wh[0], wh[1], NULL, &light) != ENVLIGHT_OK)
-            fail("envlight_light_from_rgb");
-        free(raw);
-    } else if (envlight_light_load(argv[1], NULL, &light) != ENVLIGHT_OK) {
-        fail("envlight_light_load");
-    }
+    light = open_light(argv[1]);
     if (envlight_product_new(light, &product) != ENVLIGHT_OK) fail("envlight_product_new");
     envlight_light_free(light); /* the product keeps it */
 

@@ -141,28 +141,25 @@ pub(crate) fn learn<E>(
         rays += batch.flush(pending, &mut trace)?;
         Ok::<u64, VisibilityError<E>>(rays)
     };
-    // A probe: one ray towards every other lit patch (across and down) each
-    // entry can face.
+    // A probe: one ray towards every heavy patch each entry can face and one
+    // other patch in each 2 × 2 block.
     let probe = |p: &Pending| p.probed(&patches, &grid).map(|(k, _)| (k, 1)).collect();
     let mut rays = pass(&mut pending, options.seed, &probe)?;
     // The rest of the first pass, and the second, only for the entries the
     // probe did not find nearly open: the others' learned share stays small.
-    let open: Vec<bool> = pending
-        .iter()
-        .map(|p| p.probe_seen_share(&patches, &grid) >= NEARLY_OPEN)
-        .collect();
-    for (p, open) in pending.iter_mut().zip(open) {
-        p.open = open;
+    for p in &mut pending {
+        p.open = p.probe_seen_share(&patches, &grid) >= NEARLY_OPEN;
     }
-    let open = |p: &Pending| p.open;
-    let probed = |p: &Pending, k: usize| grid.is_probed(k) || p.is_heavy(&patches, k);
     let rest = |p: &Pending| {
-        if open(p) {
+        if p.open {
             return Vec::new();
         }
         let m = options.rays_per_patch;
         p.faceable()
-            .map(|k| (k, if probed(p, k) { m - 1 } else { m }))
+            .map(|k| {
+                let probed = p.probe_rate(&patches, &grid, k).is_some();
+                (k, if probed { m - 1 } else { m })
+            })
             .filter(|&(_, n)| n > 0)
             .collect()
     };
@@ -171,7 +168,7 @@ pub(crate) fn learn<E>(
     // sees.
     if options.refine_rays > 0 {
         let edges = |p: &Pending| {
-            if open(p) {
+            if p.open {
                 Vec::new()
             } else {
                 p.edges(&grid)
@@ -274,20 +271,25 @@ impl Pending {
         patches.power(k) * self.bound[k] as f64 * self.faceable as f64 >= self.facing
     }
 
-    /// The probe's patches, each with its inverse inclusion rate: every heavy
-    /// patch (1), and one other in each 2 × 2 block of the grid (4).
+    /// Whether the probe traces patch `k` (which the entry can face), with
+    /// the inverse of its inclusion rate: every heavy patch (1), and one other
+    /// in each 2 × 2 block of the grid (4).
+    fn probe_rate(&self, patches: &Patches<'_>, grid: &Neighbours, k: usize) -> Option<f64> {
+        if self.is_heavy(patches, k) {
+            Some(1.0)
+        } else {
+            grid.is_probed(k).then_some(4.0)
+        }
+    }
+
+    /// The probe's patches, each with its inverse inclusion rate.
     fn probed<'a>(
         &'a self,
         patches: &'a Patches<'_>,
         grid: &'a Neighbours,
     ) -> impl Iterator<Item = (usize, f64)> + 'a {
-        self.faceable().filter_map(move |k| {
-            if self.is_heavy(patches, k) {
-                Some((k, 1.0))
-            } else {
-                grid.is_probed(k).then_some((k, 4.0))
-            }
-        })
+        self.faceable()
+            .filter_map(move |k| self.probe_rate(patches, grid, k).map(|rate| (k, rate)))
     }
 
     /// The share of the light the entry faces that its probe saw, each

@@ -7,9 +7,9 @@
 //! octahedral grid of normals), and for each entry and each patch of the
 //! [`ProductSampler`]'s fine level that the entry's normals can face, it asks the
 //! callback for the transmittance of a few rays from the entry's points towards
-//! directions drawn from the light within the patch (the first ray of each a
-//! probe: an entry that sees nearly all the light it faces stops there); then, in
-//! a second pass, for
+//! directions drawn from the light within the patch (after a probe of the heavy
+//! patches and one in four of the others: an entry that sees nearly all the
+//! light it faces stops there); then, in a second pass, for
 //! many more rays towards the patches on an *edge* of what the first pass saw (a
 //! patch whose rays disagreed, or agreed otherwise than a neighbour's): a window's
 //! rim, a roof's eave, the horizon of a wall. Inside a wall or open sky no ray
