@@ -518,15 +518,16 @@ class TableLight:
         x1 = dr.select(x1 == w, 0, x1)
         return x0, x1, s - self._f(i)
 
-    def lookup(self, u, v):
-        """Radiance at image point (u, v), scale applied."""
+    def lookup_texels(self, u, v):
+        """The texels the radiance at image point (u, v) blends: a list of
+        ``(x, y, weight)``, four for the bilinear lookups (weights summing to 1),
+        one for the nearest."""
         p = self.p
         w, h = p["image_width"], p["image_height"]
         periodic_u = p["mapping"] != MAPPING_EQUAL_AREA
         if p["lookup"] == LOOKUP_NEAREST:
             uu = self._periodic(u) if periodic_u else u
-            t = self._texel(self._floor_index(uu * float(w), w), self._floor_index(v * float(h), h))
-            return tuple(dr.minimum(c * self.scale, F32_MAX) for c in t)
+            return [(self._floor_index(uu * float(w), w), self._floor_index(v * float(h), h), 1.0 + 0.0 * u)]
         if p["lookup"] == LOOKUP_NODE:
             # Texel centres at (i + ½)/w along u (periodic), rows as nodes from pole
             # to pole (row j at v = j/(h − 1)).
@@ -545,6 +546,15 @@ class TableLight:
             y0, y1, ft = self._clamped_pair(v, h)
         gs = 1.0 - fs
         gt = 1.0 - ft
+        return [(x0, y0, gs * gt), (x1, y0, fs * gt), (x0, y1, gs * ft), (x1, y1, fs * ft)]
+
+    def lookup(self, u, v):
+        """Radiance at image point (u, v), scale applied."""
+        texels = self.lookup_texels(u, v)
+        if len(texels) == 1:
+            x, y, _ = texels[0]
+            return tuple(dr.minimum(c * self.scale, F32_MAX) for c in self._texel(x, y))
+        (x0, y0, wa), (x1, _, wb), (_, y1, wc), (_, _, wd) = texels
         a = self._texel(x0, y0)
         b = self._texel(x1, y0)
         c = self._texel(x0, y1)
@@ -553,8 +563,7 @@ class TableLight:
         # as the CPU's lookups are.
         return tuple(
             dr.minimum(
-                dr.minimum(((gs * gt) * a[ch] + (fs * gt) * b[ch]) + ((gs * ft) * c[ch] + (fs * ft) * d[ch]), F32_MAX)
-                * self.scale,
+                dr.minimum((wa * a[ch] + wb * b[ch]) + (wc * c[ch] + wd * d[ch]), F32_MAX) * self.scale,
                 F32_MAX,
             )
             for ch in range(3)

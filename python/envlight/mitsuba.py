@@ -36,6 +36,7 @@ RGB variants only (``scalar_rgb``, ``llvm_*_rgb``, ``cuda_*_rgb``).
 
 import importlib
 import os
+import weakref
 
 import numpy as np
 
@@ -55,6 +56,8 @@ MAPPINGS = _native.MAPPINGS
 LOOKUPS = _native.LOOKUPS
 
 _classes = {}
+# Every envlight emitter alive, of any variant (see sample_ray).
+_emitters = weakref.WeakSet()
 
 
 def _mitsuba():
@@ -66,18 +69,14 @@ def _mitsuba():
 
 
 def register():
-    """Registers the emitter type ``"envlight"`` for Mitsuba's active variant.
+    """Registers the emitter type ``"envlight"`` for Mitsuba's active variant (RGB,
+    spectral or monochrome, polarized or not; scalar, LLVM or CUDA).
 
-    Raises RuntimeError when no variant is set or the variant is not an RGB one."""
+    Raises RuntimeError when no variant is set."""
     mi = _mitsuba()
     variant = mi.variant()
     if variant is None:
         raise RuntimeError("envlight.mitsuba.register(): no Mitsuba variant is set; call mitsuba.set_variant() first")
-    if not mi.is_rgb or mi.is_polarized:
-        raise RuntimeError(
-            f'envlight.mitsuba.register(): variant "{variant}" is not supported; '
-            "the envlight emitter runs in RGB variants (scalar_rgb, llvm_ad_rgb, cuda_ad_rgb)"
-        )
     cls = _classes.get(variant)
     if cls is None:
         cls = _classes[variant] = _emitter_class(mi)
@@ -139,6 +138,61 @@ def _clamp_negative(mi, rgb, name):
     return rgb
 
 
+def _srgb_coefficients(mv, rgb):
+    """The spectral upsampling of each texel as envmap makes it: (H·W, 4) float32 of
+    the sRGB model's three coefficients of the colour scaled so that its largest
+    channel is ½, and that scale (2 · the largest channel)."""
+    flat = np.ascontiguousarray(rgb, np.float32).reshape(-1, 3)
+    scale = (flat.max(axis=1) * np.float32(2.0)).astype(np.float32)
+    norm = flat / np.maximum(np.float32(1e-8), scale)[:, None]
+    unique, inverse = np.unique(norm, axis=0, return_inverse=True)
+    coefficients = np.array([list(mv.srgb_model_fetch(mv.ScalarColor3f(*map(float, c)))) for c in unique],
+                            np.float32).reshape(-1, 3)
+    return np.concatenate([coefficients[inverse.reshape(-1)], scale[:, None]], axis=1)
+
+
+def _bounds_property(props):
+    """(centre, radius) from ``bounds_center`` and ``bounds_radius``, or None."""
+    has_centre, has_radius = "bounds_center" in props, "bounds_radius" in props
+    if not has_centre and not has_radius:
+        return None
+    if has_centre != has_radius:
+        raise ValueError('envlight emitter: "bounds_center" and "bounds_radius" must be given together')
+    try:
+        centre = tuple(float(x) for x in props["bounds_center"])
+    except TypeError:
+        centre = ()
+    radius = props["bounds_radius"]
+    if len(centre) != 3 or not all(np.isfinite(centre)):
+        raise ValueError(f'envlight emitter: "bounds_center" must be 3 finite numbers, got {props["bounds_center"]!r}')
+    if not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
+        raise ValueError(f'envlight emitter: "bounds_radius" must be a finite number > 0, got {radius!r}')
+    return centre, float(radius)
+
+
+def attach_bounds(scene):
+    """Gives every ``envlight`` emitter of a loaded ``scene`` the scene's bounding
+    sphere, which light tracing (``sample_ray``: the ``ptracer`` integrator) needs
+    and Mitsuba does not pass to an emitter written in Python. Call it after
+    ``mi.load_dict``/``mi.load_file`` and after any change to the scene's shapes;
+    returns how many emitters got the bounds."""
+    epsilon = float(_mitsuba().math.RayEpsilon)
+    bbox = scene.bbox()
+    if bbox.valid():
+        sphere = bbox.bounding_sphere()
+        centre = tuple(float(x) for x in sphere.center)
+        # Widened as Mitsuba's own environment emitters widen it.
+        radius = max(epsilon, float(sphere.radius) * (1.0 + epsilon))
+    else:
+        centre, radius = (0.0, 0.0, 0.0), epsilon
+    count = 0
+    for emitter in scene.emitters():
+        if getattr(emitter, "_is_envlight", False):
+            emitter.bounds = (centre, radius)
+            count += 1
+    return count
+
+
 def _emitter_class(mi):
     import drjit as dr
 
@@ -147,12 +201,24 @@ def _emitter_class(mi):
     # registered for.
     mv = importlib.import_module(f"mitsuba.{mi.variant()}")
     emitter_ptr = getattr(mv, "EmitterPtr", None)
+    spectral = bool(mi.is_spectral)
+    mono = bool(mi.is_monochromatic)
+    polarized = bool(mi.is_polarized)
+    # RGB and monochrome variants sample no wavelength (an empty array).
+    wavelength_type = type(dr.zeros(mv.SurfaceInteraction3f).wavelengths)
 
     class EnvlightEmitter(mv.Emitter):
         """envlight's environment light as a Mitsuba emitter (see envlight.mitsuba)."""
 
+        _is_envlight = True
+
         def __init__(self, props):
             super().__init__(props)
+            # The scene's bounding sphere, for sample_ray: from the parameters or
+            # attach_bounds(scene), since Mitsuba calls no set_scene on it.
+            self.bounds = _bounds_property(props)
+            self.m_d65 = mv.Texture.D65(1.0) if spectral else None
+            _emitters.add(self)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
             self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
             self.options = {
@@ -191,6 +257,12 @@ def _emitter_class(mi):
                 raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
             if self.tables.jit:
                 self.tables.texels = self.m_data.array
+            if spectral:
+                # Each texel's spectrum, upsampled as envmap upsamples it (constants:
+                # in spectral variants eval is not differentiable in the map).
+                coefficients = _srgb_coefficients(mv, rgb)
+                columns = [np.ascontiguousarray(coefficients[:, k]) for k in range(4)]
+                self.spectra = [mv.Float(c) for c in columns] if self.tables.jit else columns
 
         def traverse(self, callback):
             super().traverse(callback)
@@ -273,11 +345,16 @@ def _emitter_class(mi):
             (x, y, z), pdf, rgb, valid = self._sample(it, sample)
             d = mv.Vector3f(x, y, z)
             active = active & valid
-            # Mitsuba does not pass the scene to a Python emitter (set_scene is not
-            # called), so the shadow ray's end is put far beyond any scene instead
-            # of on its bounding sphere: 10⁶ times the point's distance from the
-            # origin (+1); the direction of p + d·dist − p keeps f32's precision.
-            dist = 1e6 * (1.0 + dr.norm(it.p))
+            if self.bounds is not None:
+                # Beyond the scene's bounding sphere, as envmap puts it.
+                centre, radius = self.bounds
+                dist = 2.0 * dr.maximum(radius, dr.norm(it.p - mv.Point3f(*centre)))
+            else:
+                # Mitsuba does not pass the scene to a Python emitter (set_scene is
+                # not called): without attach_bounds the shadow ray's end is put far
+                # beyond any scene, 10⁶ times the point's distance from the origin
+                # (+1); the direction of p + d·dist − p keeps f32's precision.
+                dist = 1e6 * (1.0 + dr.norm(it.p))
             ds = mv.DirectionSample3f()
             ds.p = it.p + d * dist
             ds.uv = mv.Point2f(0.0)
@@ -288,22 +365,49 @@ def _emitter_class(mi):
             ds.emitter = emitter_ptr(self) if emitter_ptr is not None else self
             ds.d = d
             ds.dist = dist
-            weight = mv.Color3f(rgb[0], rgb[1], rgb[2]) * (self._scale() / dr.select(active, pdf, 1.0))
-            return ds, dr.select(active, weight, 0.0)
+            value = self._spectrum(d, it.wavelengths, active) if spectral else self._from_rgb(rgb)
+            weight = value * (self._scale() / dr.select(active, pdf, 1.0))
+            return ds, self._polarize(dr.select(active, weight, 0.0))
 
         def sample_ray(self, time, wavelength_sample, sample2, sample3, active=True):
-            # A ray from the scene's bounding disc needs the scene's bounds, which
-            # Mitsuba does not give a Python emitter: refuse rather than guess.
-            raise NotImplementedError(
-                "envlight emitter: sample_ray (light tracing, e.g. the ptracer integrator) is not "
-                "supported: Mitsuba does not pass the scene's bounds to a Python emitter; use path, "
-                "direct or volpath"
-            )
+            """A ray leaving the environment towards the scene (light tracing): a
+            direction from the light's own density (sample3), an origin uniform on
+            the disc of the scene's bounding sphere facing it (sample2), wavelengths
+            as ``sample_wavelengths`` draws them. Weight: radiance · π r² / pdf."""
+            if self.bounds is None:
+                # Dr.Jit traces this method for every envlight emitter alive,
+                # including those of other scenes a program still holds. Without
+                # bounds while another emitter has them, this one is taken for such
+                # a bystander and traces rays of weight 0; otherwise the step was
+                # forgotten, and the error raised while Mitsuba traces the
+                # integrator reaches the caller of mi.render.
+                if any(e.bounds is not None for e in list(_emitters)):
+                    return dr.zeros(mv.Ray3f), self._polarize(dr.zeros(mv.UnpolarizedSpectrum))
+                raise RuntimeError(
+                    "envlight emitter: sample_ray (light tracing, e.g. the ptracer integrator) needs the "
+                    "scene's bounding sphere, which Mitsuba does not give an emitter written in Python: call "
+                    "envlight.mitsuba.attach_bounds(scene) after loading the scene, or give the emitter "
+                    '"bounds_center" and "bounds_radius"'
+                )
+            centre, radius = self.bounds
+            (x, y, z), pdf, rgb, valid = self.tables.sample(sample3.x, sample3.y, self._frames())
+            towards_light = mv.Vector3f(x, y, z)
+            active = active & valid
+            travel = -towards_light
+            disc = mv.warp.square_to_uniform_disk_concentric(sample2)
+            across = mv.Frame3f(travel).to_world(mv.Vector3f(disc.x, disc.y, 0.0))
+            origin = mv.Point3f(*centre) + (across + towards_light) * radius
+            wavelengths, value = self._emitted(towards_light, rgb, wavelength_sample, active)
+            weight = value * (self._scale() * (dr.pi * radius * radius) / dr.select(active, pdf, 1.0))
+            ray = mv.Ray3f(origin, travel, time, wavelengths)
+            return ray, self._polarize(dr.select(active, weight, 0.0))
 
         def sample_wavelengths(self, si, sample, active=True):
-            """RGB variants sample no wavelength: an empty set, weighted by the
-            radiance arriving along ``-si.wi`` (as ``eval``)."""
-            return dr.zeros(type(si.wavelengths)), self._radiance(-si.wi, active)
+            """Wavelengths for light arriving along ``-si.wi``, drawn as envmap draws
+            them (proportional to D65 in spectral variants; none in RGB and
+            monochrome ones), weighted by that light's radiance over their pdf."""
+            wavelengths, value = self._emitted(-si.wi, None, sample, active)
+            return wavelengths, self._polarize(dr.select(active, value * self._scale(), 0.0))
 
         def sample_position(self, time, sample, active=True):
             # An environment has no position to sample. In JIT variants Dr.Jit's
@@ -330,15 +434,72 @@ def _emitter_class(mi):
                 )
             return dr.select(active, pdf, 0.0)
 
-        def _radiance(self, d_world, active):
-            r, g, b = self.tables.radiance(*self._to_light(d_world))
-            return dr.select(active, mv.Color3f(r, g, b) * self._scale(), 0.0)
+        # -- radiance in the variant's spectrum -----------------------------------------
+
+        def _polarize(self, value):
+            """Unpolarized emission as the variant's Spectrum."""
+            return mv.depolarizer(value) if polarized else value
+
+        def _from_rgb(self, rgb):
+            """The unpolarized spectrum of an RGB radiance (scale not applied):
+            itself, or its luminance in monochrome variants (as envmap's)."""
+            colour = mv.Color3f(rgb[0], rgb[1], rgb[2])
+            return mv.UnpolarizedSpectrum(mv.luminance(colour)) if mono else colour
+
+        def _gather_spectrum(self, k, index):
+            if self.tables.jit:
+                return dr.gather(mv.Float, self.spectra[k], index)
+            return float(self.spectra[k][int(index)])
+
+        def _spectrum(self, d_world, wavelengths, active, whitepoint=True):
+            """Spectral radiance (scale not applied) arriving from ``d_world`` at
+            ``wavelengths``, as envmap evaluates it: the lookup's texels' model
+            spectra blended with its weights, times their scales blended the same
+            way, times D65 unless ``whitepoint`` is False."""
+            tables = self.tables
+            u, v, _ = tables.local_to_uv(*tables.to_light(*self._to_light(d_world)))
+            width = tables.p["image_width"]
+            shape, scale = None, None
+            for x, y, weight in tables.lookup_texels(u, v):
+                i = y * width + x
+                coefficients = mv.Vector3f(*(self._gather_spectrum(k, i) for k in range(3)))
+                term = mv.srgb_model_eval(coefficients, wavelengths) * weight
+                size = self._gather_spectrum(3, i) * weight
+                shape = term if shape is None else shape + term
+                scale = size if scale is None else scale + size
+            total = shape * (scale * tables.scale)
+            if whitepoint:
+                si = dr.zeros(mv.SurfaceInteraction3f)
+                si.wavelengths = wavelengths
+                total = total * self.m_d65.eval(si, active)
+            return total
+
+        def _emitted(self, d_world, rgb, sample, active):
+            """(wavelengths, radiance over their pdf, scale not applied) of light
+            arriving from ``d_world``; ``rgb``, its RGB radiance, where known."""
+            if not spectral:
+                if rgb is None:
+                    rgb = self.tables.radiance(*self._to_light(d_world))
+                return dr.zeros(wavelength_type), self._from_rgb(rgb)
+            n = dr.size_v(wavelength_type)
+            # n shifted copies of one sample, as Mitsuba's sample_shifted makes them.
+            shifted = [sample + k / n for k in range(n)]
+            shifted = wavelength_type(*(dr.select(t >= 1.0, t - 1.0, t) for t in shifted))
+            wavelengths, weight = self.m_d65.sample_spectrum(dr.zeros(mv.SurfaceInteraction3f), shifted, active)
+            return wavelengths, weight * self._spectrum(d_world, wavelengths, active, whitepoint=False)
+
+        def _radiance(self, d_world, wavelengths, active):
+            if spectral:
+                value = self._spectrum(d_world, wavelengths, active)
+            else:
+                value = self._from_rgb(self.tables.radiance(*self._to_light(d_world)))
+            return self._polarize(dr.select(active, value * self._scale(), 0.0))
 
         def eval(self, si, active=True):
-            return self._radiance(-si.wi, active)
+            return self._radiance(-si.wi, si.wavelengths, active)
 
         def eval_direction(self, it, ds, active=True):
-            return self._radiance(ds.d, active)
+            return self._radiance(ds.d, it.wavelengths, active)
 
         def bbox(self):
             return mv.ScalarBoundingBox3f()
