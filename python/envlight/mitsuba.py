@@ -26,12 +26,17 @@ Parameters, in Mitsuba's style:
   (``"piecewise-bilinear"``, the default: bilinear over the lookup's nodes, as
   ``envmap``'s warp is; ``"piecewise-constant"``), ``mapping`` (``"equirectangular"``,
   ``"equal-area"``) and ``lookup`` (``"node"``, the default, ``envmap``'s convention:
-  rows as nodes from pole to pole; ``"bilinear"``, texel centres; ``"nearest"``).
+  rows as nodes from pole to pole; ``"bilinear"``, texel centres; ``"nearest"``);
+- ``bounds_center`` and ``bounds_radius``: the scene's bounding sphere, which light
+  tracing (``sample_ray``, the ``ptracer`` integrator) needs; or call
+  ``attach_bounds(scene)`` once the scene is loaded.
 
-Every query (``sample_direction``, ``pdf_direction``, ``eval``, ``eval_direction``)
-is Dr.Jit code over the light's exported tables (docs/gpu-tables.md), so it traces
-into Mitsuba's kernels in symbolic mode; ``register()`` changes no Dr.Jit flag.
-RGB variants only (``scalar_rgb``, ``llvm_*_rgb``, ``cuda_*_rgb``).
+Every query (``sample_direction``, ``pdf_direction``, ``eval``, ``eval_direction``,
+``sample_ray``, ``sample_wavelengths``) is Dr.Jit code over the light's exported
+tables (docs/gpu-tables.md), so it traces into Mitsuba's kernels in symbolic mode;
+``register()`` changes no Dr.Jit flag. Every variant: the radiance is RGB, its
+luminance (monochrome), or the map upsampled to spectra as ``envmap`` does it
+(spectral); polarized variants get unpolarized emission.
 """
 
 import importlib
@@ -44,7 +49,7 @@ from . import _native
 from ._drjit_product import TableProduct
 from ._drjit_tables import TableLight
 
-__all__ = ["register"]
+__all__ = ["attach_bounds", "register"]
 
 SAMPLINGS = ("light", "product")
 # The light's option names come from the library. The Dr.Jit port evaluates the
