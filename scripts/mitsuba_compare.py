@@ -1,14 +1,18 @@
 """envlight's Mitsuba emitter against Mitsuba's envmap: agreement, cost and error.
 
     python scripts/mitsuba_compare.py [--map MAP] [--out DIR] [--variant llvm_ad_rgb]
+        [--width 96 --height 64 --spp 16 --seeds 16] [--all-diffuse]
 
-Renders one scene (diffuse spheres, a rough-plastic sphere, a diffuse ground plane)
-under MAP with Mitsuba's path integrator, and prints a markdown sheet:
+Renders one scene (diffuse spheres, a rough-plastic sphere, a diffuse ground plane;
+with --all-diffuse the middle sphere is diffuse too) under MAP with Mitsuba's path
+integrator, and prints a markdown sheet:
 
 - agreement: envlight (sampling="light") against envmap at equal samples, from S
   independent renders of each: the image mean difference in standard errors and the
   share of 8x8 blocks whose mean differs by more than 4 standard errors;
-- cost: seconds per render (after the first, which compiles), envlight over envmap;
+- cost: seconds per render (after the first, which compiles; the median of
+  --rounds renders of each emitter in turn, so that all see the same load),
+  envlight over envmap;
 - error at equal time: RMSE against a high-sample envmap reference for envmap,
   envlight with sampling="light" and envlight with sampling="product" (light x cos+
   at the normal), each given the samples that fit in envmap's time (spp scaled by
@@ -26,7 +30,7 @@ import time
 import numpy as np
 
 
-def build_scene(mi, emitter, spp, width=96, height=64, integrator="path", max_depth=4):
+def build_scene(mi, emitter, spp, width=96, height=64, integrator="path", max_depth=4, all_diffuse=False):
     integ = {"type": integrator}
     if integrator == "path":
         integ["max_depth"] = max_depth
@@ -45,7 +49,7 @@ def build_scene(mi, emitter, spp, width=96, height=64, integrator="path", max_de
         "left": {"type": "sphere", "center": [-1.1, 0.5, 0], "radius": 0.5,
                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.3, 0.2]}}},
         "middle": {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
-                   "bsdf": {"type": "roughplastic", "alpha": 0.2}},
+                   "bsdf": {"type": "diffuse"} if all_diffuse else {"type": "roughplastic", "alpha": 0.2}},
         "right": {"type": "sphere", "center": [1.1, 0.5, 0], "radius": 0.5,
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.2, 0.4, 0.8]}}},
         "sky": emitter,
@@ -68,6 +72,20 @@ def renders(mi, scene, seeds, spp=None):
     for s in seeds:
         out.append(render(mi, scene, s, spp))
     return np.stack(out), (time.perf_counter() - start) / len(seeds)
+
+
+def interleaved_seconds(mi, scenes, rounds):
+    """Median seconds per render of each scene, rendering them in turn, round after
+    round (each compiled first)."""
+    times = {name: [] for name in scenes}
+    for name, scene in scenes.items():
+        render(mi, scene, 20_000)
+    for r in range(rounds):
+        for name, scene in scenes.items():
+            start = time.perf_counter()
+            render(mi, scene, 30_000 + r)
+            times[name].append(time.perf_counter() - start)
+    return {name: float(np.median(t)) for name, t in times.items()}
 
 
 def agreement(a, b, block=8):
@@ -112,6 +130,10 @@ def main(argv=None):
     parser.add_argument("--lookup", default="node")
     parser.add_argument("--density", default=None, help="envlight's density (default: the emitter's)")
     parser.add_argument("--out", default=None)
+    parser.add_argument("--width", type=int, default=96)
+    parser.add_argument("--height", type=int, default=64)
+    parser.add_argument("--rounds", type=int, default=9, help="interleaved timing rounds")
+    parser.add_argument("--all-diffuse", action="store_true", help="the middle sphere diffuse too")
     args = parser.parse_args(argv)
 
     import mitsuba as mi
@@ -125,19 +147,25 @@ def main(argv=None):
         light["density"] = args.density
     product = dict(light, sampling="product")
     seeds = list(range(args.seeds))
-    scenes = {name: build_scene(mi, em, args.spp) for name, em in
+    def build(em, spp):
+        return build_scene(mi, em, spp, args.width, args.height, all_diffuse=args.all_diffuse)
+
+    scenes = {name: build(em, args.spp) for name, em in
               [("envmap", envmap), ("envlight light", light), ("envlight product", product)]}
     stacks, seconds = {}, {}
     for name, scene in scenes.items():
         # Independent seeds per emitter: the agreement's standard errors assume it.
         offset = 1000 * len(stacks)
-        stacks[name], seconds[name] = renders(mi, scene, [offset + s for s in seeds])
+        stacks[name], _ = renders(mi, scene, [offset + s for s in seeds])
+    seconds = interleaved_seconds(mi, scenes, args.rounds)
 
-    ref_scene = build_scene(mi, envmap, args.reference_spp)
+    ref_scene = build(envmap, args.reference_spp)
     reference = render(mi, ref_scene, 123_456)
 
     density = args.density or "the emitter's default density"
-    lines = [f"map `{os.path.basename(args.map)}`, {args.variant}, path integrator (max_depth 4), 96x64, "
+    scene_kind = "all diffuse" if args.all_diffuse else "one rough-plastic sphere"
+    lines = [f"map `{os.path.basename(args.map)}`, {args.variant}, path integrator (max_depth 4), "
+             f"{args.width}x{args.height}, {scene_kind}, "
              f"lookup {args.lookup}, {density}, {args.spp} spp, {args.seeds} independent renders per emitter, reference envmap at "
              f"{args.reference_spp} spp", ""]
     lines.append("| emitter | s / render | cost vs envmap | mean diff vs envmap (SE) | 8x8 blocks > 4 SE | "

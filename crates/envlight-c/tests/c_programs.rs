@@ -5,7 +5,7 @@
 //! callback and a C++ lambda included); every error path is a status and a
 //! message;
 //! the header compiles as C99, C11 and C++17 with warnings as errors; the C
-//! programs run clean under valgrind memcheck; eight threads on one light give
+//! programs and the C++ visibility program run clean under valgrind memcheck; eight threads on one light give
 //! the single-threaded rows; the shared library exports only `envlight_*`.
 //!
 //! The installed prefix comes from `ENVLIGHT_C_PREFIX` (`bash scripts/test` sets
@@ -636,15 +636,17 @@ fn c_programs_run_clean_under_valgrind() {
                 "2".as_ref(),
             ],
         );
-        let dir = tempfile::tempdir().unwrap();
-        memcheck(
-            &b.programs[&format!("pc_visibility_{kind}")],
-            &[
-                map.arg.as_ref(),
-                inputs.path.as_os_str(),
-                dir.path().as_os_str(),
-            ],
-        );
+        for program in ["visibility", "visibility_cpp"] {
+            let dir = tempfile::tempdir().unwrap();
+            memcheck(
+                &b.programs[&format!("pc_{program}_{kind}")],
+                &[
+                    map.arg.as_ref(),
+                    inputs.path.as_os_str(),
+                    dir.path().as_os_str(),
+                ],
+            );
+        }
     }
 }
 
