@@ -5,8 +5,9 @@
 //! callback and a C++ lambda included); every error path is a status and a
 //! message;
 //! the header compiles as C99, C11 and C++17 with warnings as errors; the C
-//! programs and the C++ visibility program run clean under valgrind memcheck; eight threads on one light give
-//! the single-threaded rows; the shared library exports only `envlight_*`.
+//! programs and the C++ visibility program run clean under valgrind memcheck;
+//! eight threads on one light, and four on one visibility cache, give the
+//! single-threaded rows; the shared library exports only `envlight_*`.
 //!
 //! The installed prefix comes from `ENVLIGHT_C_PREFIX` (`bash scripts/test` sets
 //! it after installing into `target/c-prefix`). Without it, or without a C
@@ -117,7 +118,13 @@ fn build() -> Result<Built, String> {
         compile("c", "cc", "-std=c99", "rows.c", &["-pthread"]);
         compile("cpp", "c++", "-std=c++17", "rows.cpp", &[]);
         compile("errors", "cc", "-std=c11", "errors.c", &["-lm"]);
-        compile("visibility", "cc", "-std=c99", "visibility.c", &["-lm"]);
+        compile(
+            "visibility",
+            "cc",
+            "-std=c99",
+            "visibility.c",
+            &["-lm", "-pthread"],
+        );
         compile("visibility_cpp", "c++", "-std=c++17", "visibility.cpp", &[]);
     }
     // CMake: find_package(envlight) from the prefix.

@@ -3,8 +3,10 @@
  * traces a room lit through one window. Prints rows for tests/c_programs.rs to
  * compare with the Rust library bit for bit, and checks on its own that the batch
  * calls equal the single ones, that each sample's pdf is the pdf of its
- * direction, that the cache outlives its product sampler's handle, and that a
- * saved cache loads back the same (and not under another scene key).
+ * direction, that THREADS threads querying the one cache at once get exactly
+ * the single-threaded rows, that the cache outlives its product sampler's
+ * handle, and that a saved cache loads back the same (and not under another
+ * scene key).
  *
  *   visibility MAP INPUTS DIR
  *   MAP and INPUTS as for rows.c; DIR: a writable directory for the saved cache.
@@ -24,6 +26,7 @@
  * Floats as the hex of their bits.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -144,6 +147,41 @@ static void rows(const envlight_visibility_cache *cache, const float *points, co
     }
 }
 
+/* Threads querying one cache at once. */
+#define THREADS 4
+
+typedef struct {
+    const envlight_visibility_cache *cache;
+    const float *points, *normals, *u, *dirs;
+    uint32_t n;
+    uint32_t *words;
+} pass;
+
+static void *run_pass(void *arg) {
+    pass *p = arg;
+    rows(p->cache, p->points, p->normals, p->u, p->dirs, p->n, p->words);
+    return NULL;
+}
+
+/* 1 when THREADS threads, each computing every row, all get `words`. */
+static int threads_agree(const pass *base, const uint32_t *words) {
+    pthread_t ids[THREADS];
+    pass passes[THREADS];
+    size_t bytes = sizeof *words * WORDS * base->n;
+    int t, same = 1;
+    for (t = 0; t < THREADS; t++) {
+        passes[t] = *base;
+        passes[t].words = malloc(bytes);
+        if (pthread_create(&ids[t], NULL, run_pass, &passes[t]) != 0) fail("pthread_create");
+    }
+    for (t = 0; t < THREADS; t++) {
+        pthread_join(ids[t], NULL);
+        same = same && memcmp(passes[t].words, words, bytes) == 0;
+        free(passes[t].words);
+    }
+    return same;
+}
+
 int main(int argc, char **argv) {
     envlight_light *light = NULL;
     envlight_product *product = NULL;
@@ -190,6 +228,19 @@ int main(int argc, char **argv) {
     words = malloc(sizeof *words * WORDS * n);
     again = malloc(sizeof *again * WORDS * n);
     rows(cache, points, normals, u, dirs, n, words);
+    {
+        pass base = {0};
+        base.cache = cache;
+        base.points = points;
+        base.normals = normals;
+        base.u = u;
+        base.dirs = dirs;
+        base.n = n;
+        if (!threads_agree(&base, words)) {
+            fprintf(stderr, "visibility: %d threads did not get the single-threaded rows\n", THREADS);
+            return 1;
+        }
+    }
 
     /* The batch calls give the single calls' rows. */
     samples = malloc(sizeof *samples * n);
