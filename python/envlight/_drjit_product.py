@@ -431,11 +431,15 @@ class TableProduct:
         planar = self._f32(self._patch_probability(state, k) * density)
         return dr.select(state["anything"] & (width > 0), planar, 0.0)
 
-    def _drawn_pdf(self, state, dx, dy, dz):
-        """The density of the draws before the horizon's reflection."""
-        u, v, inv_j = self.light.local_to_uv(*self.light.to_light(dx, dy, dz))
+    def _uv_pdf(self, state, u, v, inv_j):
+        """The density of the draws before the horizon's reflection, per steradian,
+        at the direction of image point (u, v) with du dv / dω = inv_j."""
         pdf = self.planar_pdf(state, u, v) * inv_j
         return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
+
+    def _drawn_pdf(self, state, dx, dy, dz):
+        """The density of the draws before the horizon's reflection."""
+        return self._uv_pdf(state, *self.light.local_to_uv(*self.light.to_light(dx, dy, dz)))
 
     def _horizon(self, state, dx, dy, dz):
         """n̂·ω for a world direction, and its mirror image in the tangent plane."""
@@ -529,19 +533,29 @@ class TableProduct:
         (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, self._cell_of, outer)
         # A draw just below the horizon is returned as its mirror image (in the
         # tables' world frame, inside any outer frame), with that direction's image
-        # point and radiance; the pdf is evaluated where the caller will.
+        # point and radiance. The pdf is `pdf` at the returned direction, from the
+        # two densities it adds: the draws' density at the drawn direction t (its
+        # image point is settle's, so it is not located again) and at the other
+        # one of the pair (t's mirror image, or the returned direction when t is
+        # reflected), which is located only where the horizon's band needs it.
         outer_to_world, outer_to_light = outer if outer is not None else (None, None)
         t = outer_to_light(dx, dy, dz) if outer is not None else (dx, dy, dz)
+        s = state["band"]
         c, (rx, ry, rz) = self._horizon(state, *t)
-        reflect = (c < 0.0) & (c > -state["band"])
+        reflect = (c < 0.0) & (c > -s)
         r = outer_to_world(rx, ry, rz) if outer is not None else (rx, ry, rz)
         dx, dy, dz = (dr.select(reflect, a, b) for a, b in zip(r, (dx, dy, dz)))
         r_light = outer_to_light(*r) if outer is not None else r
-        back = tuple(dr.select(reflect, a, b) for a, b in zip(r_light, t))
-        ru, rv, _ = light.local_to_uv(*light.to_light(*back))
-        bu = dr.select(reflect, ru, bu)
-        bv = dr.select(reflect, rv, bv)
-        pdf = self.pdf(nx, ny, nz, *back, state=state)
+        # n̂·ω of the returned direction, as `pdf` computes it there.
+        c = dr.select(reflect, self._horizon(state, *r_light)[0], c)
+        band = (c < s) & (c > -s)
+        drawn = self._uv_pdf(state, bu, bv, inv_j)
+        q = (dr.select(reflect, a, b) for a, b in zip(r_light, (rx, ry, rz)))
+        ou, ov, oj = light.local_to_uv(*light.to_light(*q))
+        other = self._uv_pdf(state, ou, ov, oj)
+        bu = dr.select(reflect, ou, bu)
+        bv = dr.select(reflect, ov, bv)
+        pdf = dr.select(band, dr.select(c < 0.0, 0.0 * drawn, drawn + other), dr.select(reflect, other, drawn))
         valid = state["anything"] & (pdf > 0.0) & (pdf < float("inf"))
         rgb = light.lookup(bu, bv)
         zero = 0.0 * inv_j
