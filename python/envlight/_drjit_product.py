@@ -100,13 +100,20 @@ class TableProduct:
         arrays = {
             "col_patch": u32(tables["col_patch"]),
             "row_patch": u32(tables["row_patch"]),
-            "cell_widths": u32(tables["cell_widths"]),
             "spans": u32(tables["spans"]),
-            "table_widths": u32(tables["table_widths"]),
             "bright_of_patch": u32(tables["bright_of_patch"]),
         }
         totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
         floats = {"node_totals": totals}
+        cell_widths = np.asarray(tables["cell_widths"], dtype=np.float64).reshape(h, w)
+        # The pdf's records, read with one gather each (f32: the pdf is f32).
+        # A patch's widths in the four corner tables of each cell of the grid of
+        # normals, over C: (patch, grid cell, corner) in `_mix`'s corner order.
+        n = self.grid
+        first = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).reshape(-1)
+        corners = np.stack([first, first + 1, first + (n + 1), first + (n + 2)], axis=1)
+        table_widths = np.asarray(tables["table_widths"], dtype=np.float64).reshape(self.patch_count, self.nodes)
+        patch_tables = (table_widths[:, corners] * INV_CDF_ONE).astype(np.float32)
         if self.bilinear:
             # Node positions are computed, not read: check that the exported ones
             # are exactly the two layouts the light builds.
@@ -115,6 +122,22 @@ class TableProduct:
                 if not np.array_equal(np.asarray(tables[name], np.float64), want):
                     raise ValueError(f"the product tables' {name} are not a layout this port computes")
             node_values = np.ascontiguousarray(tables["node_values"], dtype=np.float32).reshape(-1)
+            # Each cell's density given its patch at its four corners (top left,
+            # top right, bottom left, bottom right): the node values times the
+            # cell's width over C and over the bilinear function's mass in (u, v).
+            nv = node_values.astype(np.float64).reshape(ih + 2, iw + 2)
+            a, b, c, d = nv[:-1, :-1], nv[:-1, 1:], nv[1:, :-1], nv[1:, 1:]
+            mean = 0.25 * (((a + b) + c) + d)
+            du = np.diff(self._layout(iw, False))
+            dv = np.diff(self._layout(ih, self.node_rows))
+            area = mean * dv[:, None] * du[None, :]
+            ok = (mean > 0.0) & (area > 0.0)
+            scale = np.where(ok, cell_widths * INV_CDF_ONE / np.where(ok, area, 1.0), 0.0)
+            cell_density = np.stack([a * scale, b * scale, c * scale, d * scale], axis=-1).astype(np.float32)
+        else:
+            cell_density = (cell_widths * self.texel_scale).astype(np.float32)
+        cell_density = np.ascontiguousarray(cell_density.reshape(-1))
+        patch_tables = np.ascontiguousarray(patch_tables.reshape(-1))
         for name in ("cell_slots", "table_slots"):
             # (threshold, alias) pairs as one little-endian 64-bit word each.
             pairs = u32(tables[name])
@@ -128,6 +151,8 @@ class TableProduct:
                 setattr(self, name, mi.Float64(a))
             if self.bilinear:
                 self.node_values = mi.Float(node_values)
+            self.cell_density = mi.Float(cell_density)
+            self.patch_tables = mi.Float(patch_tables)
         else:
             for name, a in arrays.items():
                 setattr(self, name, a)
@@ -135,6 +160,8 @@ class TableProduct:
                 setattr(self, name, a)
             if self.bilinear:
                 self.node_values = node_values
+            self.cell_density = cell_density.astype(np.float64)
+            self.patch_tables = patch_tables.astype(np.float64)
 
     # -- backend helpers ------------------------------------------------------------
 
@@ -150,6 +177,19 @@ class TableProduct:
             return self.mi.UInt32(word & 0xFFFFFFFF), self.mi.UInt32(word >> 32)
         word = int(slots[int(index)])
         return word & 0xFFFFFFFF, word >> 32
+
+    def _gather4(self, table, index):
+        """The four f32 words at 4 index of `table`."""
+        if self.jit:
+            a = dr.gather(self.mi.Array4f, table, index)
+            return a[0], a[1], a[2], a[3]
+        i = 4 * int(index)
+        return tuple(float(x) for x in table[i : i + 4])
+
+    def _gather_f(self, table, index):
+        if self.jit:
+            return dr.gather(self.mi.Float, table, index)
+        return float(table[int(index)])
 
     def _gather_f64(self, table, index):
         if self.jit:
@@ -195,6 +235,7 @@ class TableProduct:
         fx = self._f64(dr.clip(gx - self.light._f(i), 0.0, 1.0))
         fy = self._f64(dr.clip(gy - self.light._f(j), 0.0, 1.0))
         first = j * (n + 1) + i
+        cell = j * n + i
         node = [first, first + 1, first + (n + 1), first + (n + 2)]
         p = [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy]
         totals = [self._gather_f64(self.node_totals, k) for k in node]
@@ -207,7 +248,7 @@ class TableProduct:
         last = 0 * i
         for m in (1, 2, 3):
             last = dr.select(p[m] > 0.0, m, last)
-        return node, p, last, totals
+        return node, p, last, totals, cell
 
     @staticmethod
     def _pick4(values, m):
@@ -250,7 +291,7 @@ class TableProduct:
         # from the normal as given in the light's frame (only its direction matters).
         ux, uy, uz = self.light.to_light(nx * inv, ny * inv, nz * inv)
         gx, gy, gz = self.light.to_light(nx, ny, nz)
-        node, p, last, totals = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
+        node, p, last, totals, cell = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
         p_last = self._pick4(p, last)
         tables = 0.0 * p[0]
         for m in range(4):
@@ -293,9 +334,14 @@ class TableProduct:
         inv_sum = 1.0 / dr.select(s > 0.0, s, 1.0)
         tables_share = dr.select(only_tables, 1.0, t_share * inv_sum)
         weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
+        tables_share = dr.select(anything, tables_share, 0.0)
+        # The pdf's terms in f32: the tables' share times each corner's weight,
+        # and the bright shares.
         return {"anything": anything, "node": node, "p": p, "last": last,
-                "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights,
-                "normal": (nx * inv, ny * inv, nz * inv), "band": band}
+                "tables_share": tables_share, "bright": weights,
+                "normal": (nx * inv, ny * inv, nz * inv), "band": band, "cell": cell,
+                "tp": [self._f32(tables_share * q) for q in p],
+                "bright32": [self._f32(o) for o in weights]}
 
     # -- picks ------------------------------------------------------------------------------
 
@@ -316,16 +362,14 @@ class TableProduct:
         return index, dr.minimum(dr.maximum(remapped, 0.0), BELOW_ONE)
 
     def _patch_probability(self, state, k):
-        """``ShadingPoint::patch_probability``: patch k's probability at the point."""
-        node, p = state["node"], state["p"]
-        nodes = self.nodes
-        widths = [self._f64(self._gather_u(self.table_widths, k * nodes + node[m])) for m in range(4)]
-        table = ((p[0] * widths[0] + p[1] * widths[1]) + (p[2] * widths[2] + p[3] * widths[3])) * INV_CDF_ONE
-        prob = state["tables_share"] * table
+        """``ShadingPoint::patch_probability``: patch k's probability at the point (f32)."""
+        w = self._gather4(self.patch_tables, k * (self.grid * self.grid) + state["cell"])
+        tp = state["tp"]
+        prob = (tp[0] * w[0] + tp[1] * w[1]) + (tp[2] * w[2] + tp[3] * w[3])
         if not self.bright:
             return prob
         b = self._gather_u(self.bright_of_patch, k)
-        for c, weight in enumerate(state["bright"]):
+        for c, weight in enumerate(state["bright32"]):
             prob = dr.select(b == c, weight, prob)
         return prob
 
@@ -406,30 +450,36 @@ class TableProduct:
             p = dr.select(at < cell, light._next_up(p), dr.select(at > cell, light._next_down(p), p))
         return p
 
-    def _density_in_cell(self, i, j, u, v, width):
-        """``Fine::locate``'s density at (u, v) of cell (i, j) of CDF width `width` (f64)."""
+    def _axis_fraction(self, x, i, n, rows):
+        """Where x lies in bilinear cell i of an axis of n texels, in [0, 1] (f32):
+        nodes as `_layout(n, rows)`, from one fused multiply-add."""
+        if rows:
+            # Cells 1 ≤ i ≤ n − 1 of width 1/(n − 1), from (i − 1)/(n − 1).
+            t = dr.fma(x, float(n - 1), -self.light._f(i - 1))
+        else:
+            # Cell 0 is [0, ½/n), cell n [(n − ½)/n, 1], the others (i ± ½)/n.
+            ends = (i == 0) | (i == n)
+            origin = dr.select(i == 0, 0.0, dr.select(i == n, float(n) - 0.5, self.light._f(i) - 0.5))
+            t = dr.fma(x, float(n), -origin)
+            t = dr.select(ends, 2.0 * t, t)
+        return dr.clip(t, 0.0, 1.0)
+
+    def _density_in_cell(self, i, j, u, v):
+        """``Fine::locate``'s density at (u, v) of cell (i, j), given its patch (f32)."""
+        index = j * self.w + i
         if not self.bilinear:
-            return self._f64(width) * self.texel_scale
-        a, b, c, d = self._corners(i, j)
-        u0, u1, v0, v1 = self._nodes(i, j)
-        du = u1 - u0
-        dv = v1 - v0
-        x = dr.clip((self._f64(u) - u0) / dr.select(du != 0.0, du, 1.0), 0.0, 1.0)
-        y = dr.clip((self._f64(v) - v0) / dr.select(dv != 0.0, dv, 1.0), 0.0, 1.0)
-        value = (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
-        mean = 0.25 * (((a + b) + c) + d)
-        area = mean * du * dv
-        density = self._f64(width) * INV_CDF_ONE * value / dr.select(mean > 0.0, area, 1.0)
-        return dr.select(mean > 0.0, density, 0.0)
+            return self._gather_f(self.cell_density, index)
+        a, b, c, d = self._gather4(self.cell_density, index)
+        x = self._axis_fraction(u, i, self.iw, False)
+        y = self._axis_fraction(v, j, self.ih, self.node_rows)
+        return (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
 
     def planar_pdf(self, state, u, v):
         """The density in (u, v) at the point (``ShadingPoint::pdf`` before dω)."""
         i, j = self._cell_of(u, v)
         k = self._gather_u(self.row_patch, j) * self.pw + self._gather_u(self.col_patch, i)
-        width = self._gather_u(self.cell_widths, j * self.w + i)
-        density = self._density_in_cell(i, j, u, v, width)
-        planar = self._f32(self._patch_probability(state, k) * density)
-        return dr.select(state["anything"] & (width > 0), planar, 0.0)
+        planar = self._patch_probability(state, k) * self._density_in_cell(i, j, u, v)
+        return dr.select(state["anything"], planar, 0.0)
 
     def _uv_pdf(self, state, u, v, inv_j):
         """The density of the draws before the horizon's reflection, per steradian,
