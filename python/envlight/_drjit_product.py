@@ -255,30 +255,40 @@ class TableProduct:
         """values[m] for a per-lane m in 0..3."""
         return dr.select(m == 0, values[0], dr.select(m == 1, values[1], dr.select(m == 2, values[2], values[3])))
 
-    def _max_dot(self, item, v0, v1, v2, rho):
-        """``Region::max_dot``: an upper bound of v·ω over the bright patch's directions."""
+    def _dot_bounds(self, item, v0, v1, v2, rho):
+        """``Region::max_dot`` at v and at −v: an upper bound of v·ω over the bright
+        patch's directions, and a lower bound (−max_dot(−v)), sharing the terms
+        that only change sign with v."""
         if item[_BRIGHT_HAS_BOX] != 0.0:
             e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[_BRIGHT_BOX]
-            side0 = e00 * v1 - e01 * v0
-            side1 = v0 * e11 - v1 * e10
-            edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
             if narrow != 0.0:
-                inside_phi = (side0 >= 0.0) & (side1 >= 0.0)
-                a = dr.select(inside_phi, rho, edges)
+                side0 = e00 * v1 - e01 * v0
+                side1 = v0 * e11 - v1 * e10
+                ea = v0 * e00 + v1 * e01
+                eb = v0 * e10 + v1 * e11
+                # At −v the sides and the edges' dots change sign.
+                a_up = dr.select((side0 >= 0.0) & (side1 >= 0.0), rho, dr.maximum(ea, eb))
+                a_low = dr.select((side0 <= 0.0) & (side1 <= 0.0), rho, -dr.minimum(ea, eb))
             else:
-                a = rho + 0.0 * edges
-            b = v2
-            inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
-            peak = dr.sqrt(a * a + b * b)
-            ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
-            return dr.select(inside_theta, peak, ends) + self.box_slack
+                a_up = a_low = rho
+
+            def bound(a, b):
+                inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
+                peak = dr.sqrt(a * a + b * b)
+                ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
+                return dr.select(inside_theta, peak, ends) + self.box_slack
+
+            return bound(a_up, v2), -bound(a_low, -v2)
         ax, ay, az, cos_half, sin_half = item[_BRIGHT_CONE]
         cos = (v0 * ax + v1 * ay) + v2 * az
         cx = v1 * az - v2 * ay
         cy = v2 * ax - v0 * az
         cz = v0 * ay - v1 * ax
         sin = dr.sqrt((cx * cx + cy * cy) + cz * cz)
-        return dr.select(cos >= cos_half, 1.0, cos * cos_half + sin * sin_half)
+        # At −v: the cosine changes sign, the cross product's length does not.
+        upper = dr.select(cos >= cos_half, 1.0, cos * cos_half + sin * sin_half)
+        lower = -dr.select(-cos >= cos_half, 1.0, -cos * cos_half + sin * sin_half)
+        return upper, lower
 
     def point(self, nx, ny, nz):
         """``ShadingPoint::move_to`` for the cosine at normal (nx, ny, nz) (f32, any
@@ -297,11 +307,12 @@ class TableProduct:
         for m in range(4):
             tables = tables + p[m] * totals[m]
         tables = dr.select(p_last <= 0.0, 0.0, tables)
-        v0, v1, v2 = self._f64(ux), self._f64(uy), self._f64(uz)
+        # The bright patches' weights in f32 (the CPU's are f64; the difference
+        # is far below the port's tolerances).
+        v0, v1, v2 = ux, uy, uz
         rho = dr.sqrt(v0 * v0 + v1 * v1)
         share = self.bound_share
         weights = []
-        bright = 0.0 * v0
         # The horizon's band: narrowed to the lowest bright patch with weight that
         # lies wholly above the horizon (`Bright::lowest_above`).
         lowest = 0.0 * v0 + self.horizon_band
@@ -309,13 +320,16 @@ class TableProduct:
             power = item[_BRIGHT_POWER]
             cx, cy, cz = item[_BRIGHT_CENTRE]
             value = (v0 * cx + v1 * cy) + v2 * cz
-            upper = dr.maximum(self._max_dot(item, v0, v1, v2, rho), 0.0)
+            upper, lower = self._dot_bounds(item, v0, v1, v2, rho)
+            upper = dr.maximum(upper, 0.0)
             g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
             o = power * dr.select(value >= share * 1.001, value, g)
             weights.append(o)
-            bright = bright + o
-            lower = -self._max_dot(item, -v0, -v1, -v2, rho)
             lowest = dr.select((o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest)
+        weights = [self._f64(o) for o in weights]
+        bright = 0.0 * tables
+        for o in weights:
+            bright = bright + o
         band = dr.clip(self._f32(lowest), self.min_horizon_band, self.horizon_band)
         total = tables + bright
         anything = ok & (total > 0.0) & (total < float("inf"))
