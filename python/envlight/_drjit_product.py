@@ -196,6 +196,13 @@ class TableProduct:
             return dr.gather(self.mi.Float64, table, index)
         return float(table[int(index)])
 
+    def _where(self, cond, fn, otherwise, *args):
+        """fn(*args) where cond holds, else otherwise(*args): a symbolic branch in
+        JIT variants (a packet of lanes none of which needs fn skips it)."""
+        if not self.jit:
+            return fn(*args) if cond else otherwise(*args)
+        return dr.if_stmt(args=args, cond=cond, true_fn=fn, false_fn=otherwise)
+
     def _f64(self, x):
         return self.mi.Float64(x) if self.jit else float(x)
 
@@ -522,7 +529,8 @@ class TableProduct:
         c, mirror = self._horizon(state, dx, dy, dz)
         own = self._drawn_pdf(state, dx, dy, dz)
         band = (c < s) & (c > -s)
-        both = own + self._drawn_pdf(state, *mirror)
+        both = own + self._where(band & (c >= 0.0), lambda x, y, z: self._drawn_pdf(state, x, y, z),
+                                 lambda x, y, z: 0.0 * x, *mirror)
         return dr.select(band, dr.select(c < 0.0, 0.0 * own, both), own)
 
     def sample(self, nx, ny, nz, xi0, xi1, outer=None):
@@ -614,9 +622,13 @@ class TableProduct:
         c = dr.select(reflect, self._horizon(state, *r_light)[0], c)
         band = (c < s) & (c > -s)
         drawn = self._uv_pdf(state, bu, bv, inv_j)
-        q = (dr.select(reflect, a, b) for a, b in zip(r_light, (rx, ry, rz)))
-        ou, ov, oj = light.local_to_uv(*light.to_light(*q))
-        other = self._uv_pdf(state, ou, ov, oj)
+        q = [dr.select(reflect, a, b) for a, b in zip(r_light, (rx, ry, rz))]
+
+        def locate(x, y, z, bu, bv):
+            ou, ov, oj = light.local_to_uv(*light.to_light(x, y, z))
+            return ou, ov, self._uv_pdf(state, ou, ov, oj)
+
+        ou, ov, other = self._where(band | reflect, locate, lambda x, y, z, bu, bv: (bu, bv, 0.0 * bu), *q, bu, bv)
         bu = dr.select(reflect, ou, bu)
         bv = dr.select(reflect, ov, bv)
         pdf = dr.select(band, dr.select(c < 0.0, 0.0 * drawn, drawn + other), dr.select(reflect, other, drawn))
