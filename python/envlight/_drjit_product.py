@@ -402,21 +402,21 @@ class TableProduct:
 
     def _cell_of(self, u, v):
         """``Fine::cell_of`` on both axes: the cell holding image point (u, v)."""
+        return self._cell_axis(u, 0), self._cell_axis(v, 1)
+
+    def _cell_axis(self, x, axis):
+        """``Fine::cell_of`` along u (axis 0) or v (axis 1)."""
+        n = self.iw if axis == 0 else self.ih
         if not self.bilinear:
-            return self.light._cell_index(u, self.iw), self.light._cell_index(v, self.ih)
-
-        # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
-        def axis(x, n):
-            t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
-            return dr.minimum(self._u(t), n)
-
-        if self.node_rows:
+            return self.light._cell_index(x, n)
+        if axis == 1 and self.node_rows:
             # The node lookup's rows along v (0, 0, j/(h − 1), 1, 1): cell k ≥ 1 is
             # [(k − 1)/(h − 1), k/(h − 1)); the zero-width end cells are never found.
-            rows = self.ih - 1
-            t = dr.maximum(self._f64(v) * float(rows), 0.0)
-            return axis(u, self.iw), 1 + dr.minimum(self._u(t), rows - 1)
-        return axis(u, self.iw), axis(v, self.ih)
+            t = dr.maximum(self._f64(x) * float(n - 1), 0.0)
+            return 1 + dr.minimum(self._u(t), n - 2)
+        # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
+        t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
+        return dr.minimum(self._u(t), n)
 
     def _corners(self, i, j):
         """The four node values (f32, as f64) around bilinear cell (i, j): top left,
@@ -467,7 +467,7 @@ class TableProduct:
         light = self.light
         p = dr.clip(self._f32(x), 0.0, float(np.float32(1.0) - np.float32(2.0**-24)))
         for _ in range(4):
-            at = self._cell_of(p, p)[axis]
+            at = self._cell_axis(p, axis)
             p = dr.select(at < cell, light._next_up(p), dr.select(at > cell, light._next_down(p), p))
         return p
 
