@@ -314,9 +314,10 @@ class TableProduct:
         for m in range(4):
             tables = tables + p[m] * totals[m]
         tables = dr.select(p_last <= 0.0, 0.0, tables)
-        # The bright patches' weights in f32 (the CPU's are f64; the difference
-        # is far below the port's tolerances).
+        # The bright patches' bounds in f32, their weights in f64 (as the CPU's:
+        # the picks and remaps of ξ read them).
         v0, v1, v2 = ux, uy, uz
+        w0, w1, w2 = self._f64(ux), self._f64(uy), self._f64(uz)
         rho = dr.sqrt(v0 * v0 + v1 * v1)
         share = self.bound_share
         weights = []
@@ -326,14 +327,13 @@ class TableProduct:
         for item in self.bright:
             power = item[_BRIGHT_POWER]
             cx, cy, cz = item[_BRIGHT_CENTRE]
-            value = (v0 * cx + v1 * cy) + v2 * cz
+            value = (w0 * cx + w1 * cy) + w2 * cz
             upper, lower = self._dot_bounds(item, v0, v1, v2, rho)
-            upper = dr.maximum(upper, 0.0)
+            upper = self._f64(dr.maximum(upper, 0.0))
             g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
             o = power * dr.select(value >= share * 1.001, value, g)
             weights.append(o)
             lowest = dr.select((o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest)
-        weights = [self._f64(o) for o in weights]
         bright = 0.0 * tables
         for o in weights:
             bright = bright + o
@@ -629,6 +629,12 @@ class TableProduct:
             return ou, ov, self._uv_pdf(state, ou, ov, oj)
 
         ou, ov, other = self._where(band | reflect, locate, lambda x, y, z, bu, bv: (bu, bv, 0.0 * bu), *q, bu, bv)
+        # A reflected draw's own density is read at the mirror image of the
+        # returned direction, as `pdf` reads it (not at t, which it equals only up
+        # to rounding).
+        mirror = self._horizon(state, *r_light)[1]
+        drawn = self._where(reflect, lambda x, y, z, p: self._drawn_pdf(state, x, y, z),
+                            lambda x, y, z, p: p, *mirror, drawn)
         bu = dr.select(reflect, ou, bu)
         bv = dr.select(reflect, ov, bv)
         pdf = dr.select(band, dr.select(c < 0.0, 0.0 * drawn, drawn + other), dr.select(reflect, other, drawn))
