@@ -262,40 +262,30 @@ class TableProduct:
         """values[m] for a per-lane m in 0..3."""
         return dr.select(m == 0, values[0], dr.select(m == 1, values[1], dr.select(m == 2, values[2], values[3])))
 
-    def _dot_bounds(self, item, v0, v1, v2, rho):
-        """``Region::max_dot`` at v and at −v: an upper bound of v·ω over the bright
-        patch's directions, and a lower bound (−max_dot(−v)), sharing the terms
-        that only change sign with v."""
+    def _max_dot(self, item, v0, v1, v2, rho):
+        """``Region::max_dot``: an upper bound of v·ω over the bright patch's
+        directions (f32); ρ = |(v0, v1)|."""
         if item[_BRIGHT_HAS_BOX] != 0.0:
             e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[_BRIGHT_BOX]
             if narrow != 0.0:
                 side0 = e00 * v1 - e01 * v0
                 side1 = v0 * e11 - v1 * e10
-                ea = v0 * e00 + v1 * e01
-                eb = v0 * e10 + v1 * e11
-                # At −v the sides and the edges' dots change sign.
-                a_up = dr.select((side0 >= 0.0) & (side1 >= 0.0), rho, dr.maximum(ea, eb))
-                a_low = dr.select((side0 <= 0.0) & (side1 <= 0.0), rho, -dr.minimum(ea, eb))
+                edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
+                a = dr.select((side0 >= 0.0) & (side1 >= 0.0), rho, edges)
             else:
-                a_up = a_low = rho
-
-            def bound(a, b):
-                inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
-                peak = dr.sqrt(a * a + b * b)
-                ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
-                return dr.select(inside_theta, peak, ends) + self.box_slack
-
-            return bound(a_up, v2), -bound(a_low, -v2)
+                a = rho
+            b = v2
+            inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
+            peak = dr.sqrt(a * a + b * b)
+            ends = dr.maximum(a * s0 + b * c0, a * s1 + b * c1)
+            return dr.select(inside_theta, peak, ends) + self.box_slack
         ax, ay, az, cos_half, sin_half = item[_BRIGHT_CONE]
         cos = (v0 * ax + v1 * ay) + v2 * az
         cx = v1 * az - v2 * ay
         cy = v2 * ax - v0 * az
         cz = v0 * ay - v1 * ax
         sin = dr.sqrt((cx * cx + cy * cy) + cz * cz)
-        # At −v: the cosine changes sign, the cross product's length does not.
-        upper = dr.select(cos >= cos_half, 1.0, cos * cos_half + sin * sin_half)
-        lower = -dr.select(-cos >= cos_half, 1.0, -cos * cos_half + sin * sin_half)
-        return upper, lower
+        return dr.select(cos >= cos_half, 1.0, cos * cos_half + sin * sin_half)
 
     def point(self, nx, ny, nz):
         """``ShadingPoint::move_to`` for the cosine at normal (nx, ny, nz) (f32, any
@@ -314,26 +304,50 @@ class TableProduct:
         for m in range(4):
             tables = tables + p[m] * totals[m]
         tables = dr.select(p_last <= 0.0, 0.0, tables)
-        # The bright patches' bounds in f32, their weights in f64 (as the CPU's:
-        # the picks and remaps of ξ read them).
+        # The bright patches' weights in f64 (as the CPU's: the picks and remaps
+        # of ξ read them), their bounds over the patch in f32.
         v0, v1, v2 = ux, uy, uz
         w0, w1, w2 = self._f64(ux), self._f64(uy), self._f64(uz)
         rho = dr.sqrt(v0 * v0 + v1 * v1)
         share = self.bound_share
         weights = []
         # The horizon's band: narrowed to the lowest bright patch with weight that
-        # lies wholly above the horizon (`Bright::lowest_above`).
+        # lies wholly above the horizon (`Bright::lowest_above`): its lower bound
+        # of n̂·ω, −max_dot(−n̂), if positive and below the band.
         lowest = 0.0 * v0 + self.horizon_band
+        # One bound per patch is computed, at ±n̂: its weight reads the upper
+        # bound only where n̂·centre < 1.001 share, and the lower bound is never
+        # above n̂·centre where it is positive (the centre lies in the patch), so
+        # it matters only where n̂·centre > 0. Where both hold (`rare`: a patch
+        # within 0.6° of the horizon), the lower bound is computed in a branch.
+        rare = v0 != v0
         for item in self.bright:
             power = item[_BRIGHT_POWER]
             cx, cy, cz = item[_BRIGHT_CENTRE]
             value = (w0 * cx + w1 * cy) + w2 * cz
-            upper, lower = self._dot_bounds(item, v0, v1, v2, rho)
-            upper = self._f64(dr.maximum(upper, 0.0))
+            floored = value < share * 1.001
+            sign = dr.select(floored, 1.0, -1.0) if self.jit else (1.0 if floored else -1.0)
+            bound = self._max_dot(item, sign * v0, sign * v1, sign * v2, rho)
+            upper = self._f64(dr.maximum(bound, 0.0))
             g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
-            o = power * dr.select(value >= share * 1.001, value, g)
+            o = power * dr.select(floored, g, value)
             weights.append(o)
-            lowest = dr.select((o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest)
+            lower = -bound
+            lowest = dr.select(~floored & (o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest) \
+                if self.jit else (lower if (not floored and o > 0.0 and 0.0 < lower < lowest) else lowest)
+            rare = rare | (floored & (value > 0.0))
+        if self.bright:
+
+            def narrow(lowest, v0, v1, v2, rho, w0, w1, w2):
+                for item in self.bright:
+                    cx, cy, cz = item[_BRIGHT_CENTRE]
+                    value = (w0 * cx + w1 * cy) + w2 * cz
+                    lower = -self._max_dot(item, -v0, -v1, -v2, rho)
+                    lowest = dr.select((value < share * 1.001) & (value > 0.0) & (lower > 0.0) & (lower < lowest),
+                                       lower, lowest)
+                return lowest
+
+            lowest = self._where(rare, narrow, lambda lowest, *a: lowest, lowest, v0, v1, v2, rho, w0, w1, w2)
         bright = 0.0 * tables
         for o in weights:
             bright = bright + o
