@@ -398,15 +398,19 @@ class TableProduct:
 
     def _patch_probability(self, state, k):
         """``ShadingPoint::patch_probability``: patch k's probability at the point (f32)."""
-        w = self._gather4(self.patch_tables, k * (self.grid * self.grid) + state["cell"])
-        tp = state["tp"]
-        prob = (tp[0] * w[0] + tp[1] * w[1]) + (tp[2] * w[2] + tp[3] * w[3])
+        prob = self._tables_probability(state, k)
         if not self.bright:
             return prob
         b = self._gather_u(self.bright_of_patch, k)
         for c, weight in enumerate(state["bright32"]):
             prob = dr.select(b == c, weight, prob)
         return prob
+
+    def _tables_probability(self, state, k):
+        """Patch k's probability from the tables' component (0 for a bright patch)."""
+        w = self._gather4(self.patch_tables, k * (self.grid * self.grid) + state["cell"])
+        tp = state["tp"]
+        return (tp[0] * w[0] + tp[1] * w[1]) + (tp[2] * w[2] + tp[3] * w[3])
 
     @staticmethod
     def _clamp_xi(xi):
@@ -499,12 +503,21 @@ class TableProduct:
             t = dr.select(ends, 2.0 * t, t)
         return dr.clip(t, 0.0, 1.0)
 
-    def _density_in_cell(self, i, j, u, v):
-        """``Fine::locate``'s density at (u, v) of cell (i, j), given its patch (f32)."""
+    def _cell_record(self, i, j):
+        """Cell (i, j)'s density record: its density (constant), or its density at
+        its four corners (bilinear)."""
         index = j * self.w + i
         if not self.bilinear:
             return self._gather_f(self.cell_density, index)
-        a, b, c, d = self._gather4(self.cell_density, index)
+        return self._gather4(self.cell_density, index)
+
+    def _density_in_cell(self, i, j, u, v, record=None):
+        """``Fine::locate``'s density at (u, v) of cell (i, j), given its patch (f32)."""
+        if record is None:
+            record = self._cell_record(i, j)
+        if not self.bilinear:
+            return record
+        a, b, c, d = record
         x = self._axis_fraction(u, i, self.iw, False)
         y = self._axis_fraction(v, j, self.ih, self.node_rows)
         return (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
@@ -519,7 +532,10 @@ class TableProduct:
     def _uv_pdf(self, state, u, v, inv_j):
         """The density of the draws before the horizon's reflection, per steradian,
         at the direction of image point (u, v) with du dv / dω = inv_j."""
-        pdf = self.planar_pdf(state, u, v) * inv_j
+        return self._finite_pdf(self.planar_pdf(state, u, v) * inv_j, inv_j)
+
+    @staticmethod
+    def _finite_pdf(pdf, inv_j):
         return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
 
     def _drawn_pdf(self, state, dx, dy, dz):
@@ -603,7 +619,10 @@ class TableProduct:
         j = y0 + row
         light = self.light
         if self.bilinear:
-            a, b_, c, d = self._corners(i, j)
+            # The cell's density record: its corners up to a common factor, which
+            # the linear densities do not read.
+            record = self._cell_record(i, j)
+            a, b_, c, d = (self._f64(x) for x in record)
             ty = self._sample_linear(fy, a + b_, c + d)
             tx = self._sample_linear(frac_u, a + (c - a) * ty, b_ + (d - b_) * ty)
             u0, u1, v0, v1 = self._nodes(i, j)
@@ -612,6 +631,7 @@ class TableProduct:
             cu = self._f32(0.5 * (u0 + u1))
             cv = self._f32(0.5 * (v0 + v1))
         else:
+            record = self._cell_record(i, j)
             u = light._nudge_into_cell(self._f32((self._f64(i) + frac_u) * (1.0 / self.iw)), i, self.iw)
             v = light._nudge_into_cell(self._f32((self._f64(j) + fy) * (1.0 / self.ih)), j, self.ih)
             cu = (light._f(i) + 0.5) / float(self.iw)
@@ -635,7 +655,20 @@ class TableProduct:
         # n̂·ω of the returned direction, as `pdf` computes it there.
         c = dr.select(reflect, self._horizon(state, *r_light)[0], c)
         band = (c < s) & (c > -s)
-        drawn = self._uv_pdf(state, bu, bv, inv_j)
+        # The draws' density at t, as `pdf` computes it there: from the sampled
+        # cell's record and patch where settle left its image point in that cell,
+        # else located afresh (in a branch).
+        ju, jv = self._cell_of(bu, bv)
+        if self.bright:
+            prob = self._tables_probability(state, k)
+            for q, weight in enumerate(state["bright32"]):
+                prob = dr.select(in_tables | (b != q), prob, weight)
+        else:
+            prob = self._tables_probability(state, k)
+        planar = dr.select(state["anything"], prob * self._density_in_cell(i, j, bu, bv, record), 0.0)
+        known = self._finite_pdf(planar * inv_j, inv_j)
+        drawn = self._where((ju != i) | (jv != j), lambda u, v, w, p: self._uv_pdf(state, u, v, w),
+                            lambda u, v, w, p: p, bu, bv, inv_j, known)
         q = [dr.select(reflect, a, b) for a, b in zip(r_light, (rx, ry, rz))]
 
         def locate(x, y, z, bu, bv):
