@@ -368,7 +368,8 @@ class TableProduct:
             s = s + o
         inv_sum = 1.0 / dr.select(s > 0.0, s, 1.0)
         tables_share = dr.select(only_tables, 1.0, t_share * inv_sum)
-        weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
+        # (Where only the tables have weight, every bright weight and its floor is 0.)
+        weights = [f * inv_sum for f in floored]
         tables_share = dr.select(anything, tables_share, 0.0)
         # The pdf's terms in f32: the tables' share times each corner's weight,
         # and the bright shares.
@@ -459,8 +460,9 @@ class TableProduct:
         return np.concatenate([[0.0], inner, [1.0]])
 
     def _node_at(self, k, n, rows):
-        """Node k of `_layout(n, rows)`, computed with the same f64 operations."""
-        x = (self._f64(k) - (1.0 if rows else 0.5)) / float(n - 1 if rows else n)
+        """Node k of `_layout(n, rows)` (f64; times the reciprocal of its divisor,
+        within an ulp of the layout's quotient: the placement rounds to f32)."""
+        x = (self._f64(k) - (1.0 if rows else 0.5)) * (1.0 / float(n - 1 if rows else n))
         return dr.select(k == 0, 0.0, dr.select(k > n, 1.0, x))
 
     def _nodes(self, i, j):
@@ -612,8 +614,8 @@ class TableProduct:
         rows = self._gather_u(self.spans, span + 3)
         first = self._gather_u(self.spans, span + 4)
         cell, frac_u = self._alias_pick(self.cell_slots, first, cols * rows, fx)
-        inv_cols = 1.0 / self._f64(cols)
-        row = self._u((self._f64(cell) + 0.5) * inv_cols)
+        # (cell + ½)/cols is at least ½/cols from a whole number: f32 finds its floor.
+        row = self._u((self.light._f(cell) + 0.5) / self.light._f(cols))
         column = cell - row * cols
         i = x0 + column
         j = y0 + row
