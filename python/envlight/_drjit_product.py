@@ -328,13 +328,14 @@ class TableProduct:
             floored = value < share * 1.001
             sign = dr.select(floored, 1.0, -1.0) if self.jit else (1.0 if floored else -1.0)
             bound = self._max_dot(item, sign * v0, sign * v1, sign * v2, rho)
-            upper = self._f64(dr.maximum(bound, 0.0))
-            g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
-            o = power * dr.select(floored, g, value)
+            # The weight: power · max(n̂·c, share · max(upper, 0)) where floored,
+            # which is 0 where upper ≤ 0 (then n̂·c < 0: the centre lies in the
+            # patch); elsewhere power · n̂·c, which is above share · |bound|.
+            o = power * dr.maximum(value, share * self._f64(dr.maximum(bound, 0.0)))
             weights.append(o)
-            lower = -bound
-            lowest = dr.select(~floored & (o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest) \
-                if self.jit else (lower if (not floored and o > 0.0 and 0.0 < lower < lowest) else lowest)
+            # Where not floored, n̂·c > 0: the weight is positive.
+            lower = dr.select(floored, 2.0, -bound)
+            lowest = dr.select((lower > 0.0) & (lower < lowest), lower, lowest)
             rare = rare | (floored & (value > 0.0))
         if self.bright:
 
