@@ -429,13 +429,15 @@ class TableProduct:
         n = self.iw if axis == 0 else self.ih
         if not self.bilinear:
             return self.light._cell_index(x, n)
+        # In f32, from one fused multiply-add (the CPU's f64 differs only for
+        # points within an f32 ulp of a cell's edge).
         if axis == 1 and self.node_rows:
             # The node lookup's rows along v (0, 0, j/(h − 1), 1, 1): cell k ≥ 1 is
             # [(k − 1)/(h − 1), k/(h − 1)); the zero-width end cells are never found.
-            t = dr.maximum(self._f64(x) * float(n - 1), 0.0)
+            t = dr.maximum(x * float(n - 1), 0.0)
             return 1 + dr.minimum(self._u(t), n - 2)
         # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
-        t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
+        t = dr.maximum(dr.fma(x, float(n), 0.5), 0.0)
         return dr.minimum(self._u(t), n)
 
     def _corners(self, i, j):
