@@ -7,7 +7,8 @@ A shading point with normal n draws directions with density ∝ L(ω) · max(0, 
 
 - the point's state, as ``ShadingPoint::move_to`` computes it: the normal's cell in
   the octahedral grid of normals and the bilinear weights of its four corner
-  tables (f32 placement, f64 weights), and the bright patches' weights at n;
+  tables (f32 placement, f64 weights), and the bright patches' weights at n
+  (f64, from their bounds over the patch in f32);
 - a sample, as ``ShadingPoint::sample``: a table or a bright patch from ξ₀, a patch
   from the table's alias table (ξ₁), a texel from the patch's alias table and a
   point in it, every pick in f64 and integers as on the CPU;
@@ -25,6 +26,14 @@ grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Pytho
 number (f64). Both densities: the piecewise-constant one's cells are the texels,
 the piecewise-bilinear one's the cells between its nodes, with a point placed in a
 cell by inverting the bilinear function's marginal and conditional (f64).
+
+The pdf is computed in f32 from records built once from the tables (numpy, f64,
+rounded to f32): each cell's density given its patch (at its four corners for the
+bilinear density), and each patch's width in the four corner tables of each cell
+of the grid of normals; a direction reads one of each. A sample's pdf reuses what
+its draw found (its cell's record and its patch), and the horizon band's second
+density and a cell located afresh are computed in symbolic branches, which
+packets of lanes that do not need them skip.
 """
 
 import drjit as dr
