@@ -158,8 +158,6 @@ class TableProduct:
                 setattr(self, name, U(a))
             for name, a in floats.items():
                 setattr(self, name, mi.Float64(a))
-            if self.bilinear:
-                self.node_values = mi.Float(node_values)
             self.cell_density = mi.Float(cell_density)
             self.patch_tables = mi.Float(patch_tables)
         else:
@@ -167,8 +165,6 @@ class TableProduct:
                 setattr(self, name, a)
             for name, a in floats.items():
                 setattr(self, name, a)
-            if self.bilinear:
-                self.node_values = node_values
             self.cell_density = cell_density.astype(np.float64)
             self.patch_tables = patch_tables.astype(np.float64)
 
@@ -448,20 +444,6 @@ class TableProduct:
         # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
         t = dr.maximum(dr.fma(x, float(n), 0.5), 0.0)
         return dr.minimum(self._u(t), n)
-
-    def _corners(self, i, j):
-        """The four node values (f32, as f64) around bilinear cell (i, j): top left,
-        top right, bottom left, bottom right."""
-        mu = self.iw + 2
-        top = j * mu + i
-        bottom = top + mu
-
-        def g(k):
-            if self.jit:
-                return self.mi.Float64(dr.gather(self.mi.Float, self.node_values, k))
-            return float(self.node_values[int(k)])
-
-        return g(top), g(top + 1), g(bottom), g(bottom + 1)
 
     @staticmethod
     def _layout(n, rows):
