@@ -7,7 +7,8 @@ A shading point with normal n draws directions with density ∝ L(ω) · max(0, 
 
 - the point's state, as ``ShadingPoint::move_to`` computes it: the normal's cell in
   the octahedral grid of normals and the bilinear weights of its four corner
-  tables (f32 placement, f64 weights), and the bright patches' weights at n;
+  tables (f32 placement, f64 weights), and the bright patches' weights at n
+  (f64, from their bounds over the patch in f32);
 - a sample, as ``ShadingPoint::sample``: a table or a bright patch from ξ₀, a patch
   from the table's alias table (ξ₁), a texel from the patch's alias table and a
   point in it, every pick in f64 and integers as on the CPU;
@@ -25,6 +26,14 @@ grid in ``Float`` (f32), as on the CPU; in scalar variants everything is a Pytho
 number (f64). Both densities: the piecewise-constant one's cells are the texels,
 the piecewise-bilinear one's the cells between its nodes, with a point placed in a
 cell by inverting the bilinear function's marginal and conditional (f64).
+
+The pdf is computed in f32 from records built once from the tables (numpy, f64,
+rounded to f32): each cell's density given its patch (at its four corners for the
+bilinear density), and each patch's width in the four corner tables of each cell
+of the grid of normals; a direction reads one of each. A sample's pdf reuses what
+its draw found (its cell's record and its patch), and the horizon band's second
+density and a cell located afresh are computed in symbolic branches, which
+packets of lanes that do not need them skip.
 """
 
 import drjit as dr
@@ -100,13 +109,20 @@ class TableProduct:
         arrays = {
             "col_patch": u32(tables["col_patch"]),
             "row_patch": u32(tables["row_patch"]),
-            "cell_widths": u32(tables["cell_widths"]),
             "spans": u32(tables["spans"]),
-            "table_widths": u32(tables["table_widths"]),
             "bright_of_patch": u32(tables["bright_of_patch"]),
         }
         totals = np.ascontiguousarray(tables["node_totals"], dtype=np.float64)
         floats = {"node_totals": totals}
+        cell_widths = np.asarray(tables["cell_widths"], dtype=np.float64).reshape(h, w)
+        # The pdf's records, read with one gather each (f32: the pdf is f32).
+        # A patch's widths in the four corner tables of each cell of the grid of
+        # normals, over C: (patch, grid cell, corner) in `_mix`'s corner order.
+        n = self.grid
+        first = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).reshape(-1)
+        corners = np.stack([first, first + 1, first + (n + 1), first + (n + 2)], axis=1)
+        table_widths = np.asarray(tables["table_widths"], dtype=np.float64).reshape(self.patch_count, self.nodes)
+        patch_tables = (table_widths[:, corners] * INV_CDF_ONE).astype(np.float32)
         if self.bilinear:
             # Node positions are computed, not read: check that the exported ones
             # are exactly the two layouts the light builds.
@@ -115,6 +131,22 @@ class TableProduct:
                 if not np.array_equal(np.asarray(tables[name], np.float64), want):
                     raise ValueError(f"the product tables' {name} are not a layout this port computes")
             node_values = np.ascontiguousarray(tables["node_values"], dtype=np.float32).reshape(-1)
+            # Each cell's density given its patch at its four corners (top left,
+            # top right, bottom left, bottom right): the node values times the
+            # cell's width over C and over the bilinear function's mass in (u, v).
+            nv = node_values.astype(np.float64).reshape(ih + 2, iw + 2)
+            a, b, c, d = nv[:-1, :-1], nv[:-1, 1:], nv[1:, :-1], nv[1:, 1:]
+            mean = 0.25 * (((a + b) + c) + d)
+            du = np.diff(self._layout(iw, False))
+            dv = np.diff(self._layout(ih, self.node_rows))
+            area = mean * dv[:, None] * du[None, :]
+            ok = (mean > 0.0) & (area > 0.0)
+            scale = np.where(ok, cell_widths * INV_CDF_ONE / np.where(ok, area, 1.0), 0.0)
+            cell_density = np.stack([a * scale, b * scale, c * scale, d * scale], axis=-1).astype(np.float32)
+        else:
+            cell_density = (cell_widths * self.texel_scale).astype(np.float32)
+        cell_density = np.ascontiguousarray(cell_density.reshape(-1))
+        patch_tables = np.ascontiguousarray(patch_tables.reshape(-1))
         for name in ("cell_slots", "table_slots"):
             # (threshold, alias) pairs as one little-endian 64-bit word each.
             pairs = u32(tables[name])
@@ -126,15 +158,15 @@ class TableProduct:
                 setattr(self, name, U(a))
             for name, a in floats.items():
                 setattr(self, name, mi.Float64(a))
-            if self.bilinear:
-                self.node_values = mi.Float(node_values)
+            self.cell_density = mi.Float(cell_density)
+            self.patch_tables = mi.Float(patch_tables)
         else:
             for name, a in arrays.items():
                 setattr(self, name, a)
             for name, a in floats.items():
                 setattr(self, name, a)
-            if self.bilinear:
-                self.node_values = node_values
+            self.cell_density = cell_density.astype(np.float64)
+            self.patch_tables = patch_tables.astype(np.float64)
 
     # -- backend helpers ------------------------------------------------------------
 
@@ -151,10 +183,30 @@ class TableProduct:
         word = int(slots[int(index)])
         return word & 0xFFFFFFFF, word >> 32
 
+    def _gather4(self, table, index):
+        """The four f32 words at 4 index of `table`."""
+        if self.jit:
+            a = dr.gather(self.mi.Array4f, table, index)
+            return a[0], a[1], a[2], a[3]
+        i = 4 * int(index)
+        return tuple(float(x) for x in table[i : i + 4])
+
+    def _gather_f(self, table, index):
+        if self.jit:
+            return dr.gather(self.mi.Float, table, index)
+        return float(table[int(index)])
+
     def _gather_f64(self, table, index):
         if self.jit:
             return dr.gather(self.mi.Float64, table, index)
         return float(table[int(index)])
+
+    def _where(self, cond, fn, otherwise, *args):
+        """fn(*args) where cond holds, else otherwise(*args): a symbolic branch in
+        JIT variants (a packet of lanes none of which needs fn skips it)."""
+        if not self.jit:
+            return fn(*args) if cond else otherwise(*args)
+        return dr.if_stmt(args=args, cond=cond, true_fn=fn, false_fn=otherwise)
 
     def _f64(self, x):
         return self.mi.Float64(x) if self.jit else float(x)
@@ -195,6 +247,7 @@ class TableProduct:
         fx = self._f64(dr.clip(gx - self.light._f(i), 0.0, 1.0))
         fy = self._f64(dr.clip(gy - self.light._f(j), 0.0, 1.0))
         first = j * (n + 1) + i
+        cell = j * n + i
         node = [first, first + 1, first + (n + 1), first + (n + 2)]
         p = [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy]
         totals = [self._gather_f64(self.node_totals, k) for k in node]
@@ -207,7 +260,7 @@ class TableProduct:
         last = 0 * i
         for m in (1, 2, 3):
             last = dr.select(p[m] > 0.0, m, last)
-        return node, p, last, totals
+        return node, p, last, totals, cell
 
     @staticmethod
     def _pick4(values, m):
@@ -215,17 +268,17 @@ class TableProduct:
         return dr.select(m == 0, values[0], dr.select(m == 1, values[1], dr.select(m == 2, values[2], values[3])))
 
     def _max_dot(self, item, v0, v1, v2, rho):
-        """``Region::max_dot``: an upper bound of v·ω over the bright patch's directions."""
+        """``Region::max_dot``: an upper bound of v·ω over the bright patch's
+        directions (f32); ρ = |(v0, v1)|."""
         if item[_BRIGHT_HAS_BOX] != 0.0:
             e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[_BRIGHT_BOX]
-            side0 = e00 * v1 - e01 * v0
-            side1 = v0 * e11 - v1 * e10
-            edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
             if narrow != 0.0:
-                inside_phi = (side0 >= 0.0) & (side1 >= 0.0)
-                a = dr.select(inside_phi, rho, edges)
+                side0 = e00 * v1 - e01 * v0
+                side1 = v0 * e11 - v1 * e10
+                edges = dr.maximum(v0 * e00 + v1 * e01, v0 * e10 + v1 * e11)
+                a = dr.select((side0 >= 0.0) & (side1 >= 0.0), rho, edges)
             else:
-                a = rho + 0.0 * edges
+                a = rho
             b = v2
             inside_theta = ((a * c0 - b * s0) >= 0.0) & ((b * s1 - a * c1) >= 0.0)
             peak = dr.sqrt(a * a + b * b)
@@ -250,31 +303,60 @@ class TableProduct:
         # from the normal as given in the light's frame (only its direction matters).
         ux, uy, uz = self.light.to_light(nx * inv, ny * inv, nz * inv)
         gx, gy, gz = self.light.to_light(nx, ny, nz)
-        node, p, last, totals = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
+        node, p, last, totals, cell = self._mix(dr.select(ok, gx, 0.0), dr.select(ok, gy, 0.0), dr.select(ok, gz, 1.0))
         p_last = self._pick4(p, last)
         tables = 0.0 * p[0]
         for m in range(4):
             tables = tables + p[m] * totals[m]
         tables = dr.select(p_last <= 0.0, 0.0, tables)
-        v0, v1, v2 = self._f64(ux), self._f64(uy), self._f64(uz)
+        # The bright patches' weights in f64 (as the CPU's: the picks and remaps
+        # of ξ read them), their bounds over the patch in f32.
+        v0, v1, v2 = ux, uy, uz
+        w0, w1, w2 = self._f64(ux), self._f64(uy), self._f64(uz)
         rho = dr.sqrt(v0 * v0 + v1 * v1)
         share = self.bound_share
         weights = []
-        bright = 0.0 * v0
         # The horizon's band: narrowed to the lowest bright patch with weight that
-        # lies wholly above the horizon (`Bright::lowest_above`).
+        # lies wholly above the horizon (`Bright::lowest_above`): its lower bound
+        # of n̂·ω, −max_dot(−n̂), if positive and below the band.
         lowest = 0.0 * v0 + self.horizon_band
+        # One bound per patch is computed, at ±n̂: its weight reads the upper
+        # bound only where n̂·centre < 1.001 share, and the lower bound is never
+        # above n̂·centre where it is positive (the centre lies in the patch), so
+        # it matters only where n̂·centre > 0. Where both hold (`rare`: a patch
+        # within 0.6° of the horizon), the lower bound is computed in a branch.
+        rare = v0 != v0
         for item in self.bright:
             power = item[_BRIGHT_POWER]
             cx, cy, cz = item[_BRIGHT_CENTRE]
-            value = (v0 * cx + v1 * cy) + v2 * cz
-            upper = dr.maximum(self._max_dot(item, v0, v1, v2, rho), 0.0)
-            g = dr.select(upper > 0.0, dr.maximum(dr.maximum(value, 0.0), share * upper), 0.0)
-            o = power * dr.select(value >= share * 1.001, value, g)
+            value = (w0 * cx + w1 * cy) + w2 * cz
+            floored = value < share * 1.001
+            sign = dr.select(floored, 1.0, -1.0) if self.jit else (1.0 if floored else -1.0)
+            bound = self._max_dot(item, sign * v0, sign * v1, sign * v2, rho)
+            # The weight: power · max(n̂·c, share · max(upper, 0)) where floored,
+            # which is 0 where upper ≤ 0 (then n̂·c < 0: the centre lies in the
+            # patch); elsewhere power · n̂·c, which is above share · |bound|.
+            o = power * dr.maximum(value, share * self._f64(dr.maximum(bound, 0.0)))
             weights.append(o)
+            # Where not floored, n̂·c > 0: the weight is positive.
+            lower = dr.select(floored, 2.0, -bound)
+            lowest = dr.select((lower > 0.0) & (lower < lowest), lower, lowest)
+            rare = rare | (floored & (value > 0.0))
+        if self.bright:
+
+            def narrow(lowest, v0, v1, v2, rho, w0, w1, w2):
+                for item in self.bright:
+                    cx, cy, cz = item[_BRIGHT_CENTRE]
+                    value = (w0 * cx + w1 * cy) + w2 * cz
+                    lower = -self._max_dot(item, -v0, -v1, -v2, rho)
+                    lowest = dr.select((value < share * 1.001) & (value > 0.0) & (lower > 0.0) & (lower < lowest),
+                                       lower, lowest)
+                return lowest
+
+            lowest = self._where(rare, narrow, lambda lowest, *a: lowest, lowest, v0, v1, v2, rho, w0, w1, w2)
+        bright = 0.0 * tables
+        for o in weights:
             bright = bright + o
-            lower = -self._max_dot(item, -v0, -v1, -v2, rho)
-            lowest = dr.select((o > 0.0) & (lower > 0.0) & (lower < lowest), lower, lowest)
         band = dr.clip(self._f32(lowest), self.min_horizon_band, self.horizon_band)
         total = tables + bright
         anything = ok & (total > 0.0) & (total < float("inf"))
@@ -292,10 +374,16 @@ class TableProduct:
             s = s + o
         inv_sum = 1.0 / dr.select(s > 0.0, s, 1.0)
         tables_share = dr.select(only_tables, 1.0, t_share * inv_sum)
-        weights = [dr.select(only_tables, o, f * inv_sum) for o, f in zip(weights, floored)]
+        # (Where only the tables have weight, every bright weight and its floor is 0.)
+        weights = [f * inv_sum for f in floored]
+        tables_share = dr.select(anything, tables_share, 0.0)
+        # The pdf's terms in f32: the tables' share times each corner's weight,
+        # and the bright shares.
         return {"anything": anything, "node": node, "p": p, "last": last,
-                "tables_share": dr.select(anything, tables_share, 0.0), "bright": weights,
-                "normal": (nx * inv, ny * inv, nz * inv), "band": band}
+                "tables_share": tables_share, "bright": weights,
+                "normal": (nx * inv, ny * inv, nz * inv), "band": band, "cell": cell,
+                "tp": [self._f32(tables_share * q) for q in p],
+                "bright32": [self._f32(o) for o in weights]}
 
     # -- picks ------------------------------------------------------------------------------
 
@@ -316,18 +404,20 @@ class TableProduct:
         return index, dr.minimum(dr.maximum(remapped, 0.0), BELOW_ONE)
 
     def _patch_probability(self, state, k):
-        """``ShadingPoint::patch_probability``: patch k's probability at the point."""
-        node, p = state["node"], state["p"]
-        nodes = self.nodes
-        widths = [self._f64(self._gather_u(self.table_widths, k * nodes + node[m])) for m in range(4)]
-        table = ((p[0] * widths[0] + p[1] * widths[1]) + (p[2] * widths[2] + p[3] * widths[3])) * INV_CDF_ONE
-        prob = state["tables_share"] * table
+        """``ShadingPoint::patch_probability``: patch k's probability at the point (f32)."""
+        prob = self._tables_probability(state, k)
         if not self.bright:
             return prob
         b = self._gather_u(self.bright_of_patch, k)
-        for c, weight in enumerate(state["bright"]):
+        for c, weight in enumerate(state["bright32"]):
             prob = dr.select(b == c, weight, prob)
         return prob
+
+    def _tables_probability(self, state, k):
+        """Patch k's probability from the tables' component (0 for a bright patch)."""
+        w = self._gather4(self.patch_tables, k * (self.grid * self.grid) + state["cell"])
+        tp = state["tp"]
+        return (tp[0] * w[0] + tp[1] * w[1]) + (tp[2] * w[2] + tp[3] * w[3])
 
     @staticmethod
     def _clamp_xi(xi):
@@ -337,35 +427,23 @@ class TableProduct:
 
     def _cell_of(self, u, v):
         """``Fine::cell_of`` on both axes: the cell holding image point (u, v)."""
+        return self._cell_axis(u, 0), self._cell_axis(v, 1)
+
+    def _cell_axis(self, x, axis):
+        """``Fine::cell_of`` along u (axis 0) or v (axis 1)."""
+        n = self.iw if axis == 0 else self.ih
         if not self.bilinear:
-            return self.light._cell_index(u, self.iw), self.light._cell_index(v, self.ih)
-
-        # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
-        def axis(x, n):
-            t = dr.maximum(self._f64(x) * float(n) + 0.5, 0.0)
-            return dr.minimum(self._u(t), n)
-
-        if self.node_rows:
+            return self.light._cell_index(x, n)
+        # In f32, from one fused multiply-add (the CPU's f64 differs only for
+        # points within an f32 ulp of a cell's edge).
+        if axis == 1 and self.node_rows:
             # The node lookup's rows along v (0, 0, j/(h − 1), 1, 1): cell k ≥ 1 is
             # [(k − 1)/(h − 1), k/(h − 1)); the zero-width end cells are never found.
-            rows = self.ih - 1
-            t = dr.maximum(self._f64(v) * float(rows), 0.0)
-            return axis(u, self.iw), 1 + dr.minimum(self._u(t), rows - 1)
-        return axis(u, self.iw), axis(v, self.ih)
-
-    def _corners(self, i, j):
-        """The four node values (f32, as f64) around bilinear cell (i, j): top left,
-        top right, bottom left, bottom right."""
-        mu = self.iw + 2
-        top = j * mu + i
-        bottom = top + mu
-
-        def g(k):
-            if self.jit:
-                return self.mi.Float64(dr.gather(self.mi.Float, self.node_values, k))
-            return float(self.node_values[int(k)])
-
-        return g(top), g(top + 1), g(bottom), g(bottom + 1)
+            t = dr.maximum(x * float(n - 1), 0.0)
+            return 1 + dr.minimum(self._u(t), n - 2)
+        # Nodes at 0, (i + ½)/n, 1: cell i is [(i − ½)/n, (i + ½)/n).
+        t = dr.maximum(dr.fma(x, float(n), 0.5), 0.0)
+        return dr.minimum(self._u(t), n)
 
     @staticmethod
     def _layout(n, rows):
@@ -376,8 +454,9 @@ class TableProduct:
         return np.concatenate([[0.0], inner, [1.0]])
 
     def _node_at(self, k, n, rows):
-        """Node k of `_layout(n, rows)`, computed with the same f64 operations."""
-        x = (self._f64(k) - (1.0 if rows else 0.5)) / float(n - 1 if rows else n)
+        """Node k of `_layout(n, rows)` (f64; times the reciprocal of its divisor,
+        within an ulp of the layout's quotient: the placement rounds to f32)."""
+        x = (self._f64(k) - (1.0 if rows else 0.5)) * (1.0 / float(n - 1 if rows else n))
         return dr.select(k == 0, 0.0, dr.select(k > n, 1.0, x))
 
     def _nodes(self, i, j):
@@ -402,40 +481,62 @@ class TableProduct:
         light = self.light
         p = dr.clip(self._f32(x), 0.0, float(np.float32(1.0) - np.float32(2.0**-24)))
         for _ in range(4):
-            at = self._cell_of(p, p)[axis]
+            at = self._cell_axis(p, axis)
             p = dr.select(at < cell, light._next_up(p), dr.select(at > cell, light._next_down(p), p))
         return p
 
-    def _density_in_cell(self, i, j, u, v, width):
-        """``Fine::locate``'s density at (u, v) of cell (i, j) of CDF width `width` (f64)."""
+    def _axis_fraction(self, x, i, n, rows):
+        """Where x lies in bilinear cell i of an axis of n texels, in [0, 1] (f32):
+        nodes as `_layout(n, rows)`, from one fused multiply-add."""
+        if rows:
+            # Cells 1 ≤ i ≤ n − 1 of width 1/(n − 1), from (i − 1)/(n − 1).
+            t = dr.fma(x, float(n - 1), -self.light._f(i - 1))
+        else:
+            # Cell 0 is [0, ½/n), cell n [(n − ½)/n, 1], the others (i ± ½)/n.
+            ends = (i == 0) | (i == n)
+            origin = dr.select(i == 0, 0.0, dr.select(i == n, float(n) - 0.5, self.light._f(i) - 0.5))
+            t = dr.fma(x, float(n), -origin)
+            t = dr.select(ends, 2.0 * t, t)
+        return dr.clip(t, 0.0, 1.0)
+
+    def _cell_record(self, i, j):
+        """Cell (i, j)'s density record: its density (constant), or its density at
+        its four corners (bilinear)."""
+        index = j * self.w + i
         if not self.bilinear:
-            return self._f64(width) * self.texel_scale
-        a, b, c, d = self._corners(i, j)
-        u0, u1, v0, v1 = self._nodes(i, j)
-        du = u1 - u0
-        dv = v1 - v0
-        x = dr.clip((self._f64(u) - u0) / dr.select(du != 0.0, du, 1.0), 0.0, 1.0)
-        y = dr.clip((self._f64(v) - v0) / dr.select(dv != 0.0, dv, 1.0), 0.0, 1.0)
-        value = (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
-        mean = 0.25 * (((a + b) + c) + d)
-        area = mean * du * dv
-        density = self._f64(width) * INV_CDF_ONE * value / dr.select(mean > 0.0, area, 1.0)
-        return dr.select(mean > 0.0, density, 0.0)
+            return self._gather_f(self.cell_density, index)
+        return self._gather4(self.cell_density, index)
+
+    def _density_in_cell(self, i, j, u, v, record=None):
+        """``Fine::locate``'s density at (u, v) of cell (i, j), given its patch (f32)."""
+        if record is None:
+            record = self._cell_record(i, j)
+        if not self.bilinear:
+            return record
+        a, b, c, d = record
+        x = self._axis_fraction(u, i, self.iw, False)
+        y = self._axis_fraction(v, j, self.ih, self.node_rows)
+        return (1.0 - y) * (a + (b - a) * x) + y * (c + (d - c) * x)
 
     def planar_pdf(self, state, u, v):
         """The density in (u, v) at the point (``ShadingPoint::pdf`` before dω)."""
         i, j = self._cell_of(u, v)
         k = self._gather_u(self.row_patch, j) * self.pw + self._gather_u(self.col_patch, i)
-        width = self._gather_u(self.cell_widths, j * self.w + i)
-        density = self._density_in_cell(i, j, u, v, width)
-        planar = self._f32(self._patch_probability(state, k) * density)
-        return dr.select(state["anything"] & (width > 0), planar, 0.0)
+        planar = self._patch_probability(state, k) * self._density_in_cell(i, j, u, v)
+        return dr.select(state["anything"], planar, 0.0)
+
+    def _uv_pdf(self, state, u, v, inv_j):
+        """The density of the draws before the horizon's reflection, per steradian,
+        at the direction of image point (u, v) with du dv / dω = inv_j."""
+        return self._finite_pdf(self.planar_pdf(state, u, v) * inv_j, inv_j)
+
+    @staticmethod
+    def _finite_pdf(pdf, inv_j):
+        return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
 
     def _drawn_pdf(self, state, dx, dy, dz):
         """The density of the draws before the horizon's reflection."""
-        u, v, inv_j = self.light.local_to_uv(*self.light.to_light(dx, dy, dz))
-        pdf = self.planar_pdf(state, u, v) * inv_j
-        return dr.select((inv_j < float("inf")) & (pdf < float("inf")), pdf, 0.0)
+        return self._uv_pdf(state, *self.light.local_to_uv(*self.light.to_light(dx, dy, dz)))
 
     def _horizon(self, state, dx, dy, dz):
         """n̂·ω for a world direction, and its mirror image in the tangent plane."""
@@ -454,7 +555,8 @@ class TableProduct:
         c, mirror = self._horizon(state, dx, dy, dz)
         own = self._drawn_pdf(state, dx, dy, dz)
         band = (c < s) & (c > -s)
-        both = own + self._drawn_pdf(state, *mirror)
+        both = own + self._where(band & (c >= 0.0), lambda x, y, z: self._drawn_pdf(state, x, y, z),
+                                 lambda x, y, z: 0.0 * x, *mirror)
         return dr.select(band, dr.select(c < 0.0, 0.0 * own, both), own)
 
     def sample(self, nx, ny, nz, xi0, xi1, outer=None):
@@ -506,14 +608,17 @@ class TableProduct:
         rows = self._gather_u(self.spans, span + 3)
         first = self._gather_u(self.spans, span + 4)
         cell, frac_u = self._alias_pick(self.cell_slots, first, cols * rows, fx)
-        inv_cols = 1.0 / self._f64(cols)
-        row = self._u((self._f64(cell) + 0.5) * inv_cols)
+        # (cell + ½)/cols is at least ½/cols from a whole number: f32 finds its floor.
+        row = self._u((self.light._f(cell) + 0.5) / self.light._f(cols))
         column = cell - row * cols
         i = x0 + column
         j = y0 + row
         light = self.light
         if self.bilinear:
-            a, b_, c, d = self._corners(i, j)
+            # The cell's density record: its corners up to a common factor, which
+            # the linear densities do not read.
+            record = self._cell_record(i, j)
+            a, b_, c, d = (self._f64(x) for x in record)
             ty = self._sample_linear(fy, a + b_, c + d)
             tx = self._sample_linear(frac_u, a + (c - a) * ty, b_ + (d - b_) * ty)
             u0, u1, v0, v1 = self._nodes(i, j)
@@ -522,6 +627,7 @@ class TableProduct:
             cu = self._f32(0.5 * (u0 + u1))
             cv = self._f32(0.5 * (v0 + v1))
         else:
+            record = self._cell_record(i, j)
             u = light._nudge_into_cell(self._f32((self._f64(i) + frac_u) * (1.0 / self.iw)), i, self.iw)
             v = light._nudge_into_cell(self._f32((self._f64(j) + fy) * (1.0 / self.ih)), j, self.ih)
             cu = (light._f(i) + 0.5) / float(self.iw)
@@ -529,19 +635,52 @@ class TableProduct:
         (dx, dy, dz), bu, bv, inv_j = light.settle(u, v, i, j, cu, cv, self._cell_of, outer)
         # A draw just below the horizon is returned as its mirror image (in the
         # tables' world frame, inside any outer frame), with that direction's image
-        # point and radiance; the pdf is evaluated where the caller will.
+        # point and radiance. The pdf is `pdf` at the returned direction, from the
+        # two densities it adds: the draws' density at the drawn direction t (its
+        # image point is settle's, so it is not located again) and at the other
+        # one of the pair (t's mirror image, or the returned direction when t is
+        # reflected), which is located only where the horizon's band needs it.
         outer_to_world, outer_to_light = outer if outer is not None else (None, None)
         t = outer_to_light(dx, dy, dz) if outer is not None else (dx, dy, dz)
+        s = state["band"]
         c, (rx, ry, rz) = self._horizon(state, *t)
-        reflect = (c < 0.0) & (c > -state["band"])
+        reflect = (c < 0.0) & (c > -s)
         r = outer_to_world(rx, ry, rz) if outer is not None else (rx, ry, rz)
         dx, dy, dz = (dr.select(reflect, a, b) for a, b in zip(r, (dx, dy, dz)))
         r_light = outer_to_light(*r) if outer is not None else r
-        back = tuple(dr.select(reflect, a, b) for a, b in zip(r_light, t))
-        ru, rv, _ = light.local_to_uv(*light.to_light(*back))
-        bu = dr.select(reflect, ru, bu)
-        bv = dr.select(reflect, rv, bv)
-        pdf = self.pdf(nx, ny, nz, *back, state=state)
+        # n̂·ω of the returned direction, as `pdf` computes it there.
+        c = dr.select(reflect, self._horizon(state, *r_light)[0], c)
+        band = (c < s) & (c > -s)
+        # The draws' density at t, as `pdf` computes it there: from the sampled
+        # cell's record and patch where settle left its image point in that cell,
+        # else located afresh (in a branch).
+        ju, jv = self._cell_of(bu, bv)
+        if self.bright:
+            prob = self._tables_probability(state, k)
+            for q, weight in enumerate(state["bright32"]):
+                prob = dr.select(in_tables | (b != q), prob, weight)
+        else:
+            prob = self._tables_probability(state, k)
+        planar = dr.select(state["anything"], prob * self._density_in_cell(i, j, bu, bv, record), 0.0)
+        known = self._finite_pdf(planar * inv_j, inv_j)
+        drawn = self._where((ju != i) | (jv != j), lambda u, v, w, p: self._uv_pdf(state, u, v, w),
+                            lambda u, v, w, p: p, bu, bv, inv_j, known)
+        q = [dr.select(reflect, a, b) for a, b in zip(r_light, (rx, ry, rz))]
+
+        def locate(x, y, z, bu, bv):
+            ou, ov, oj = light.local_to_uv(*light.to_light(x, y, z))
+            return ou, ov, self._uv_pdf(state, ou, ov, oj)
+
+        ou, ov, other = self._where(band | reflect, locate, lambda x, y, z, bu, bv: (bu, bv, 0.0 * bu), *q, bu, bv)
+        # A reflected draw's own density is read at the mirror image of the
+        # returned direction, as `pdf` reads it (not at t, which it equals only up
+        # to rounding).
+        mirror = self._horizon(state, *r_light)[1]
+        drawn = self._where(reflect, lambda x, y, z, p: self._drawn_pdf(state, x, y, z),
+                            lambda x, y, z, p: p, *mirror, drawn)
+        bu = dr.select(reflect, ou, bu)
+        bv = dr.select(reflect, ov, bv)
+        pdf = dr.select(band, dr.select(c < 0.0, 0.0 * drawn, drawn + other), dr.select(reflect, other, drawn))
         valid = state["anything"] & (pdf > 0.0) & (pdf < float("inf"))
         rgb = light.lookup(bu, bv)
         zero = 0.0 * inv_j

@@ -183,6 +183,13 @@ class TableLight:
             return x
         return float(np.nextafter(np.float32(x), np.float32(-np.inf)))
 
+    def _where(self, cond, fn, otherwise, *args):
+        """fn(*args) where cond holds, else otherwise(*args): a symbolic branch in
+        JIT variants (a packet of lanes none of which needs fn skips it)."""
+        if not self.jit:
+            return fn(*args) if cond else otherwise(*args)
+        return dr.if_stmt(args=args, cond=cond, true_fn=fn, false_fn=otherwise)
+
     def _loop(self, state, cond, body):
         return dr.while_loop(state=state, cond=cond, body=body)
 
@@ -268,8 +275,8 @@ class TableLight:
         return x, frac
 
     def _cdf_sample(self, cdf, guide, shift, n, xi):
-        """(cell, offset in it) of ξ on the CDF of n cells at word `cdf`, found from the
-        guide at word `guide` and a forward scan."""
+        """(cell, offset in it, its width) of ξ on the CDF of n cells at word `cdf`,
+        found from the guide at word `guide` and a forward scan."""
         x, frac = self._to_fixed(xi)
         if isinstance(shift, int):
             slice_ = (x >> shift) if shift < 32 else 0 * x
@@ -288,7 +295,7 @@ class TableLight:
         width = self._word(cdf + o + 1) - lo
         positive = width > 0
         offset = (self._f(x - lo) + frac) / self._f(dr.select(positive, width, 1))
-        return o, dr.select(positive, offset, 0.0)
+        return o, dr.select(positive, offset, 0.0), width
 
     def _cell_widths(self, iu, iv):
         p = self.p
@@ -304,12 +311,13 @@ class TableLight:
     def _sample_cell(self, xi0, xi1):
         p = self.p
         nu, nv = p["table_width"], p["table_height"]
-        mv, ov = self._cdf_sample(p["marginal_cdf"], p["marginal_guide"], p["marginal_guide_shift"], nv, xi1)
+        mv, ov, wv = self._cdf_sample(p["marginal_cdf"], p["marginal_guide"], p["marginal_guide_shift"], nv, xi1)
         bits = p["conditional_guide_bits"]
         row_cdf = p["conditional_cdf"] + mv * (nu + 1)
         row_guide = p["conditional_guide"] + mv * (1 << bits)
-        mu, ou = self._cdf_sample(row_cdf, row_guide, 32 - bits, nu, xi0)
-        return mu, mv, ou, ov
+        mu, ou, wu = self._cdf_sample(row_cdf, row_guide, 32 - bits, nu, xi0)
+        # The cell's widths are those `_cell_widths(mu, mv)` reads.
+        return mu, mv, ou, ov, (wu, wv)
 
     # -- densities -----------------------------------------------------------------
 
@@ -318,18 +326,22 @@ class TableLight:
 
     def _sample_inversion(self, xi0, xi1):
         p = self.p
-        iu, iv, ou, ov = self._sample_cell(xi0, xi1)
+        iu, iv, ou, ov, widths = self._sample_cell(xi0, xi1)
         u = self._place_in_cell(iu, ou, p["table_width"])
         v = self._place_in_cell(iv, ov, p["table_height"])
-        return u, v, iu, iv
+        return u, v, iu, iv, widths
 
     def _pdf_constant(self, u, v):
         p = self.p
         iu = self._cell_index(u, p["table_width"])
         iv = self._cell_index(v, p["table_height"])
+        return self._pdf_constant_in(self._cell_widths(iu, iv))
+
+    def _pdf_constant_in(self, widths):
+        """The piecewise-constant density in a cell of CDF widths (wu, wv)."""
+        p = self.p
         cells = float(p["table_width"]) * float(p["table_height"])
-        wu, wv = self._cell_widths(iu, iv)
-        return self._probability_of_widths(wu, wv) * cells
+        return self._probability_of_widths(*widths) * cells
 
     def _node(self, j, n):
         """Node j of an axis of n texels: 0, (j − ½)/n for 1 ≤ j ≤ n, 1."""
@@ -389,14 +401,14 @@ class TableLight:
         return dr.select(a == b, xi, dr.select(ok, x, 0.0))
 
     def _sample_bilinear(self, xi0, xi1):
-        i, k, ou, ov = self._sample_cell(xi0, xi1)
-        f00, f10, f01, f11 = self._corners(i, k)
+        i, k, ou, ov, widths = self._sample_cell(xi0, xi1)
+        f00, f10, f01, f11 = corners = self._corners(i, k)
         y = self._sample_linear(ov, f00 + f10, f01 + f11)
         x = self._sample_linear(ou, dr.lerp(f00, f01, y), dr.lerp(f10, f11, y))
         w, h = self.p["image_width"], self.p["image_height"]
         u = dr.lerp(self._node(i, w), self._node(i + 1, w), x)
         v = dr.lerp(self._v_node(k, h), self._v_node(k + 1, h), y)
-        return dr.minimum(u, ONE_MINUS_EPSILON), dr.minimum(v, ONE_MINUS_EPSILON), i, k
+        return dr.minimum(u, ONE_MINUS_EPSILON), dr.minimum(v, ONE_MINUS_EPSILON), i, k, (corners, widths)
 
     def _pdf_bilinear(self, u, v):
         w, h = self.p["image_width"], self.p["image_height"]
@@ -404,7 +416,13 @@ class TableLight:
         v = self._unit_closed(v)
         i = self._patch_of(u, w)
         k = self._v_patch_of(v, h)
-        f00, f10, f01, f11 = self._corners(i, k)
+        return self._pdf_bilinear_in(u, v, i, k, self._corners(i, k), self._cell_widths(i, k))
+
+    def _pdf_bilinear_in(self, u, v, i, k, corners, widths):
+        """The piecewise-bilinear density at (u, v) ∈ [0, 1]² in patch (i, k), of
+        node values `corners` and CDF widths (wu, wv)."""
+        w, h = self.p["image_width"], self.p["image_height"]
+        f00, f10, f01, f11 = corners
         left = dr.maximum(u - self._node(i, w), 0.0)
         right = dr.maximum(self._node(i + 1, w) - u, 0.0)
         top = dr.maximum(v - self._v_node(k, h), 0.0)
@@ -413,8 +431,7 @@ class TableLight:
         area = self._patch_width(i, w) * self._v_patch_width(k, h)
         denominator = area * area * (f00 + f10 + f01 + f11)
         ok = denominator > 0.0
-        wu, wv = self._cell_widths(i, k)
-        probability = self._probability_of_widths(wu, wv)
+        probability = self._probability_of_widths(*widths)
         return dr.select(ok, 4.0 * probability * (weighted / dr.select(ok, denominator, 1.0)), 0.0)
 
     def planar_pdf(self, u, v):
@@ -655,13 +672,24 @@ class TableLight:
             d = outer_to_world(*self.to_world(*self.uv_to_local(xi0, xi1)))
             zero = 0.0 * xi0
             return d, zero, (zero, zero, zero), xi0 != xi0
-        if self.p["density"] == DENSITY_BILINEAR:
-            u, v, iu, iv = self._sample_bilinear(xi0, xi1)
+        bilinear = self.p["density"] == DENSITY_BILINEAR
+        if bilinear:
+            u, v, iu, iv, (corners, widths) = self._sample_bilinear(xi0, xi1)
         else:
-            u, v, iu, iv = self._sample_inversion(xi0, xi1)
+            u, v, iu, iv, widths = self._sample_inversion(xi0, xi1)
         cu, cv = self._centre_of(iu, iv)
         (dx, dy, dz), bu, bv, inv_j = self.settle(u, v, iu, iv, cu, cv, self._cell_of, outer)
-        pdf = self._solid_angle_pdf(bu, bv, inv_j)
+        # The pdf at the settled image point, as `pdf` computes it: from the
+        # sampled cell's node values and widths where the point lies in that cell
+        # (settled), else located afresh (in a branch).
+        ju, jv = self._cell_of(bu, bv)
+        if bilinear:
+            known = self._pdf_bilinear_in(self._unit_closed(bu), self._unit_closed(bv), iu, iv, corners, widths)
+        else:
+            known = self._pdf_constant_in(widths)
+        planar = self._where((ju != iu) | (jv != iv), lambda u, v, p: self.planar_pdf(u, v),
+                             lambda u, v, p: p, bu, bv, known)
+        pdf = planar * inv_j
         valid = pdf > 0.0
         rgb = self.lookup(bu, bv)
         zero = 0.0 * pdf
