@@ -1,7 +1,7 @@
 """envlight's Mitsuba emitter against Mitsuba's envmap: agreement, cost and error.
 
     python scripts/mitsuba_compare.py [--map MAP] [--out DIR] [--variant llvm_ad_rgb]
-        [--width 96 --height 64 --spp 16 --seeds 16] [--all-diffuse]
+        [--width 96 --height 64 --spp 16 --seeds 16 --rounds 9] [--all-diffuse]
 
 Renders one scene (diffuse spheres, a rough-plastic sphere, a diffuse ground plane;
 with --all-diffuse the middle sphere is diffuse too) under MAP with Mitsuba's path
@@ -152,7 +152,7 @@ def main(argv=None):
 
     scenes = {name: build(em, args.spp) for name, em in
               [("envmap", envmap), ("envlight light", light), ("envlight product", product)]}
-    stacks, seconds = {}, {}
+    stacks = {}
     for name, scene in scenes.items():
         # Independent seeds per emitter: the agreement's standard errors assume it.
         offset = 1000 * len(stacks)

@@ -202,11 +202,7 @@ class TableProduct:
         return float(table[int(index)])
 
     def _where(self, cond, fn, otherwise, *args):
-        """fn(*args) where cond holds, else otherwise(*args): a symbolic branch in
-        JIT variants (a packet of lanes none of which needs fn skips it)."""
-        if not self.jit:
-            return fn(*args) if cond else otherwise(*args)
-        return dr.if_stmt(args=args, cond=cond, true_fn=fn, false_fn=otherwise)
+        return self.light._where(cond, fn, otherwise, *args)
 
     def _f64(self, x):
         return self.mi.Float64(x) if self.jit else float(x)

@@ -61,7 +61,7 @@ MAPPINGS = _native.MAPPINGS
 LOOKUPS = _native.LOOKUPS
 
 _classes = {}
-# Every envlight emitter alive, of any variant (see sample_ray).
+# Every envlight emitter alive (see sample_ray).
 _emitters = weakref.WeakSet()
 
 
@@ -143,10 +143,25 @@ def _clamp_negative(mi, rgb, name):
     return rgb
 
 
-def _srgb_coefficients(mv, rgb):
+def _srgb_coefficients(mi, variant, mv, rgb):
     """The spectral upsampling of each texel as envmap makes it: (H·W, 4) float32 of
     the sRGB model's three coefficients of the colour scaled so that its largest
-    channel is ½, and that scale (2 · the largest channel)."""
+    channel is ½, and that scale (2 · the largest channel).
+
+    Read from an ``envmap`` built over the same texels (its ``data`` holds exactly
+    these, with a copy of the opposite edge column on each side), or, where its
+    layout is not that one or the active variant is not ``variant`` (``mv``'s),
+    computed texel colour by texel colour (about 7 µs each)."""
+    h, w, _ = rgb.shape
+    data = None
+    if mi.variant() == variant:
+        try:
+            envmap = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(rgb, np.float32))})
+            data = np.array(mi.traverse(envmap)["data"], np.float32)
+        except Exception:  # pragma: no cover - depends on Mitsuba's version
+            data = None
+    if data is not None and data.shape == (h, w + 2, 4):
+        return np.ascontiguousarray(data[:, 1:w + 1, :]).reshape(-1, 4)
     flat = np.ascontiguousarray(rgb, np.float32).reshape(-1, 3)
     scale = (flat.max(axis=1) * np.float32(2.0)).astype(np.float32)
     norm = flat / np.maximum(np.float32(1e-8), scale)[:, None]
@@ -170,7 +185,7 @@ def _bounds_property(props):
     radius = props["bounds_radius"]
     if len(centre) != 3 or not all(np.isfinite(centre)):
         raise ValueError(f'envlight emitter: "bounds_center" must be 3 finite numbers, got {props["bounds_center"]!r}')
-    if not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
         raise ValueError(f'envlight emitter: "bounds_radius" must be a finite number > 0, got {radius!r}')
     return centre, float(radius)
 
@@ -204,7 +219,8 @@ def _emitter_class(mi):
     # The variant's own module: `mitsuba.X` follows whichever variant is active
     # when it is read, but an emitter must keep the types of the variant it was
     # registered for.
-    mv = importlib.import_module(f"mitsuba.{mi.variant()}")
+    variant = mi.variant()
+    mv = importlib.import_module(f"mitsuba.{variant}")
     emitter_ptr = getattr(mv, "EmitterPtr", None)
     spectral = bool(mi.is_spectral)
     mono = bool(mi.is_monochromatic)
@@ -223,7 +239,7 @@ def _emitter_class(mi):
             # attach_bounds(scene), since Mitsuba calls no set_scene on it.
             self.bounds = _bounds_property(props)
             self.m_d65 = mv.Texture.D65(1.0) if spectral else None
-            _emitters.add(self)
+            self._warned_bystander = False
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
             self.sampling = _choice(props, "sampling", SAMPLINGS, "light")
             self.options = {
@@ -246,6 +262,7 @@ def _emitter_class(mi):
             # that traverse() can expose it and an update reaches the queries.
             self.m_to_world = self.world_transform()
             self._build(rgb)
+            _emitters.add(self)
 
         def _build(self, rgb):
             """Builds the CPU light over rgb and the Dr.Jit evaluator of its tables.
@@ -265,14 +282,18 @@ def _emitter_class(mi):
             if spectral:
                 # Each texel's spectrum, upsampled as envmap upsamples it (constants:
                 # in spectral variants eval is not differentiable in the map).
-                coefficients = _srgb_coefficients(mv, rgb)
+                coefficients = _srgb_coefficients(mi, variant, mv, rgb)
                 columns = [np.ascontiguousarray(coefficients[:, k]) for k in range(4)]
                 self.spectra = [mv.Float(c) for c in columns] if self.tables.jit else columns
 
         def traverse(self, callback):
             super().traverse(callback)
             callback.put("scale", self.m_scale, mi.ParamFlags.Differentiable)
-            callback.put("data", self.m_data, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
+            # In spectral variants the radiance reads the model's coefficients of
+            # the map, a table lookup: not differentiable in the map.
+            data_flags = (mi.ParamFlags.NonDifferentiable if spectral
+                          else mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
+            callback.put("data", self.m_data, data_flags)
             callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)
 
         def parameters_changed(self, keys=[]):
@@ -380,13 +401,21 @@ def _emitter_class(mi):
             the disc of the scene's bounding sphere facing it (sample2), wavelengths
             as ``sample_wavelengths`` draws them. Weight: radiance · π r² / pdf."""
             if self.bounds is None:
-                # Dr.Jit traces this method for every envlight emitter alive,
-                # including those of other scenes a program still holds. Without
-                # bounds while another emitter has them, this one is taken for such
-                # a bystander and traces rays of weight 0; otherwise the step was
+                # In JIT variants Dr.Jit traces this method for every envlight
+                # emitter of the variant alive, including those of other scenes a
+                # program still holds. Without bounds while another emitter of the
+                # variant has them, this one is taken for such a bystander: it
+                # traces rays of weight 0 and says so once. Otherwise the step was
                 # forgotten, and the error raised while Mitsuba traces the
                 # integrator reaches the caller of mi.render.
-                if any(e.bounds is not None for e in list(_emitters)):
+                others = [e for e in list(_emitters) if isinstance(e, EnvlightEmitter) and e.bounds is not None]
+                if self.tables.jit and others:
+                    if not self._warned_bystander:
+                        self._warned_bystander = True
+                        mi.Log(mi.LogLevel.Warn,
+                               f'envlight emitter "{self.name}" has no scene bounds and traces no light rays; '
+                               "if it belongs to the scene being rendered, call "
+                               "envlight.mitsuba.attach_bounds(scene)")
                     return dr.zeros(mv.Ray3f), self._polarize(dr.zeros(mv.UnpolarizedSpectrum))
                 raise RuntimeError(
                     "envlight emitter: sample_ray (light tracing, e.g. the ptracer integrator) needs the "
