@@ -399,12 +399,15 @@ class TableProduct:
         remapped = dr.select(width != 0.0, offset / safe, 0.0)
         return index, dr.minimum(dr.maximum(remapped, 0.0), BELOW_ONE)
 
-    def _patch_probability(self, state, k):
-        """``ShadingPoint::patch_probability``: patch k's probability at the point (f32)."""
+    def _patch_probability(self, state, k, b=None):
+        """``ShadingPoint::patch_probability``: patch k's probability at the point (f32).
+        ``b``: k's place among the bright patches (``NO_BRIGHT`` if none) where the
+        caller knows it, else read from the table."""
         prob = self._tables_probability(state, k)
         if not self.bright:
             return prob
-        b = self._gather_u(self.bright_of_patch, k)
+        if b is None:
+            b = self._gather_u(self.bright_of_patch, k)
         for c, weight in enumerate(state["bright32"]):
             prob = dr.select(b == c, weight, prob)
         return prob
@@ -651,12 +654,9 @@ class TableProduct:
         # cell's record and patch where settle left its image point in that cell,
         # else located afresh (in a branch).
         ju, jv = self._cell_of(bu, bv)
-        if self.bright:
-            prob = self._tables_probability(state, k)
-            for q, weight in enumerate(state["bright32"]):
-                prob = dr.select(in_tables | (b != q), prob, weight)
-        else:
-            prob = self._tables_probability(state, k)
+        # The tables give the bright patches no weight: a patch drawn from them is
+        # not one.
+        prob = self._patch_probability(state, k, dr.select(in_tables, NO_BRIGHT, b))
         planar = dr.select(state["anything"], prob * self._density_in_cell(i, j, bu, bv, record), 0.0)
         known = self._finite_pdf(planar * inv_j, inv_j)
         drawn = self._where((ju != i) | (jv != j), lambda u, v, w, p: self._uv_pdf(state, u, v, w),
