@@ -369,29 +369,6 @@ fn programs_give_the_rust_librarys_rows_bit_for_bit() {
     }
 }
 
-/// The room of tests/c/visibility.c, as that program computes it: 1 when the ray
-/// from `o` (inside the box `[-1, 1]² × [0, 2]`) along `d` leaves through the
-/// window in its `+x` wall (`|y| < 0.4`, `0.6 < z < 1.4`), else 0.
-fn room(o: Vec3, d: Vec3) -> f32 {
-    let exit = |o: f32, d: f32, lo: f32, hi: f32| {
-        if d > 0.0 {
-            (hi - o) / d
-        } else if d < 0.0 {
-            (lo - o) / d
-        } else {
-            f32::INFINITY
-        }
-    };
-    let (tx, ty, tz) = (
-        exit(o.x, d.x, -1.0, 1.0),
-        exit(o.y, d.y, -1.0, 1.0),
-        exit(o.z, d.z, 0.0, 2.0),
-    );
-    let (y, z) = (o.y + d.y * tx, o.z + d.z * tx);
-    let window = d.x > 0.0 && tx <= ty && tx <= tz;
-    (window && y.abs() < 0.4 && z > 0.6 && z < 1.4) as u8 as f32
-}
-
 /// The visibility programs' query point `k` and its normal (their header says
 /// which).
 fn query_point(k: u32) -> (Vec3, Vec3) {
@@ -432,7 +409,7 @@ fn expected_visibility_rows(map: &Map, inputs: &Inputs) -> BTreeMap<String, Stri
     let trace = |o: &[Vec3], d: &[Vec3], t: &mut [f32]| -> Result<(), std::convert::Infallible> {
         rays += o.len() as u64;
         for ((o, d), t) in o.iter().zip(d).zip(t.iter_mut()) {
-            *t = room(*o, *d);
+            *t = room::room_transmittance(o.to_array(), d.to_array());
         }
         Ok(())
     };
@@ -681,6 +658,10 @@ fn shared_library_exports_only_envlight_symbols() {
 
 #[path = "../../envlight-cli/tests/common/doc_blocks.rs"]
 mod doc_blocks;
+
+/// The room `tests/c/visibility.c` traces.
+#[path = "common/room.rs"]
+mod room;
 
 /// Every `c`, `cpp` and `cmake` block of README.md and docs/*.md, as a newcomer
 /// would use it: a C program (one with `main`) built through pkg-config, shared and
