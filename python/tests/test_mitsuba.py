@@ -253,6 +253,14 @@ def test_a_wrong_product_table_is_rejected(variant):
     assert disagreeing(d, pdf, l, d_cpu, pdf_cpu, l_cpu).mean() > 0.3
 
 
+def arriving(rng, n):
+    """n surface interactions (JIT) whose wi are random directions (any length)."""
+    q = rng.normal(size=(n, 3)).astype(np.float32)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(q[:, 0], q[:, 1], q[:, 2])
+    return si
+
+
 def emitter(rgb, **params):
     return mi.load_dict({"type": "envlight", "bitmap": mi.Bitmap(rgb), **params})
 
@@ -617,9 +625,7 @@ def test_a_new_map_through_traverse_in_a_spectral_variant():
     params.update()
     n = 1000
     rng = np.random.default_rng(4)
-    q = rng.normal(size=(n, 3)).astype(np.float32)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(q[:, 0], q[:, 1], q[:, 2])
+    si = arriving(rng, n)
     lam = rng.uniform(360.0, 830.0, size=(4, n)).astype(np.float32)
     si.wavelengths = type(si.wavelengths)(*(mi.Float(lam[k]) for k in range(4)))
     updated, expected = np.array(em.eval(si)), np.array(fresh.eval(si))
@@ -801,10 +807,7 @@ def test_eval_is_differentiable_in_the_map():
     dr.enable_grad(params["data"])
     params.update()
     n = 1000
-    rng = np.random.default_rng(2)
-    q = rng.normal(size=(n, 3)).astype(np.float32)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(q[:, 0], q[:, 1], q[:, 2])
+    si = arriving(np.random.default_rng(2), n)
     value = em.eval(si)
     dr.backward(dr.sum(value[0] + value[1] + value[2]))
     grad = np.array(dr.grad(params["data"]))
