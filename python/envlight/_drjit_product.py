@@ -102,6 +102,11 @@ class TableProduct:
         bright = np.asarray(tables["bright"], dtype=np.float64).reshape(-1, _BRIGHT_WORDS)
         # Python floats: numpy scalars would turn Dr.Jit arrays into numpy arrays.
         self.bright = [[float(x) for x in row] for row in bright]
+        # The patches that can lie wholly above a horizon their centre is less than
+        # asin(1.001 share) above (see `point`): those whose region holds no cap of
+        # that radius (and 10⁻³ more, far beyond f32's rounding) around the centre.
+        reach = np.arcsin(self.bound_share * 1.001) + 1e-3
+        self.tiny = [bool(self._inscribed_radius(row) <= reach) for row in self.bright]
 
         def u32(a):
             return np.ascontiguousarray(np.asarray(a).reshape(-1), dtype=np.uint32)
@@ -167,6 +172,27 @@ class TableProduct:
                 setattr(self, name, a)
             self.cell_density = cell_density.astype(np.float64)
             self.patch_tables = patch_tables.astype(np.float64)
+
+    @staticmethod
+    def _inscribed_radius(item):
+        """A lower bound of the angular radius of the largest cap around a bright
+        patch's centre inside its region (radians; numpy, f64): the distances from
+        the centre to the lat-long box's two parallels and, for a box narrower than
+        a half turn, to its two meridians' great circles; or the cone's half-angle
+        less the centre's angle from its axis."""
+        cx, cy, cz = item[_BRIGHT_CENTRE]
+        if item[_BRIGHT_HAS_BOX] == 0.0:
+            ax, ay, az, cos_half, sin_half = item[_BRIGHT_CONE]
+            half = np.arctan2(sin_half, cos_half)
+            return half - np.arccos(np.clip(cx * ax + cy * ay + cz * az, -1.0, 1.0))
+        e00, e01, e10, e11, narrow, s0, c0, s1, c1 = item[_BRIGHT_BOX]
+        theta = np.arccos(np.clip(cz, -1.0, 1.0))
+        radius = min(theta - np.arctan2(s0, c0), np.arctan2(s1, c1) - theta)
+        if narrow != 0.0:
+            # sin of the distance to a meridian's plane, signed positive inside.
+            for side in (cy * e00 - cx * e01, cx * e11 - cy * e10):
+                radius = min(radius, np.arcsin(np.clip(side, -1.0, 1.0)))
+        return float(radius)
 
     # -- backend helpers ------------------------------------------------------------
 
@@ -320,9 +346,11 @@ class TableProduct:
         # bound only where n̂·centre < 1.001 share, and the lower bound is never
         # above n̂·centre where it is positive (the centre lies in the patch), so
         # it matters only where n̂·centre > 0. Where both hold (`rare`: a patch
-        # within 0.6° of the horizon), the lower bound is computed in a branch.
+        # whose centre is within 0.6° above the horizon), the lower bound is
+        # computed in a branch, for the patches that can then lie wholly above the
+        # horizon (`tiny`): any other reaches below it, and its lower bound is < 0.
         rare = v0 != v0
-        for item in self.bright:
+        for item, tiny in zip(self.bright, self.tiny):
             power = item[_BRIGHT_POWER]
             cx, cy, cz = item[_BRIGHT_CENTRE]
             value = (w0 * cx + w1 * cy) + w2 * cz
@@ -337,11 +365,12 @@ class TableProduct:
             # Where not floored, n̂·c > 0: the weight is positive.
             lower = dr.select(floored, 2.0, -bound)
             lowest = dr.select((lower > 0.0) & (lower < lowest), lower, lowest)
-            rare = rare | (floored & (value > 0.0))
-        if self.bright:
+            if tiny:
+                rare = rare | (floored & (value > 0.0))
+        if any(self.tiny):
 
             def narrow(lowest, v0, v1, v2, rho, w0, w1, w2):
-                for item in self.bright:
+                for item in (item for item, tiny in zip(self.bright, self.tiny) if tiny):
                     cx, cy, cz = item[_BRIGHT_CENTRE]
                     value = (w0 * cx + w1 * cy) + w2 * cz
                     lower = -self._max_dot(item, -v0, -v1, -v2, rho)

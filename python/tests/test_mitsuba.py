@@ -14,6 +14,7 @@ Skipped (one line in the summary) where Mitsuba cannot be imported; the LLVM tes
 are skipped (one line) where Dr.Jit finds no LLVM (set DRJIT_LIBLLVM_PATH).
 """
 
+import copy
 import gc
 import os
 import pathlib
@@ -251,6 +252,44 @@ def test_a_wrong_product_table_is_rejected(variant):
     d_cpu, pdf_cpu, l_cpu = (x.astype(np.float64) for x in light.sample_product(normals, u))
     d, pdf, l, p = product_rows(tp, normals, u, d_cpu.astype(np.float32))
     assert disagreeing(d, pdf, l, d_cpu, pdf_cpu, l_cpu).mean() > 0.3
+
+
+def test_band_narrowing_skips_only_the_patches_that_cannot_narrow_it():
+    """The horizon band at a normal whose horizon passes within 0.6° below a bright
+    patch's centre is narrowed only by patches too small to reach below it (`tiny`);
+    computing every patch's lower bound there (as the CPU does) gives the same band
+    bit for bit, and leaving out the tiny ones changes it."""
+    llvm()
+    h, w = 256, 512
+    rgb = np.ones((h, w, 3), np.float32)
+    # Patches of 8 x 8 texels: bright texels at a patch's corner (a centre 0.35°
+    # from its edges) and at patches' middles.
+    for j, i, value in [(64, 96, 4000.0), (100, 300, 3000.0), (180, 20, 2500.0), (148, 404, 2000.0)]:
+        rgb[j, i] = value
+    light = envlight.EnvironmentLight.from_array(rgb, lookup="node", density="piecewise-bilinear")
+    tp = product_port(light)
+    assert 0 < sum(tp.tiny) < len(tp.tiny), tp.tiny
+    every = copy.copy(tp)
+    every.tiny = [True] * len(tp.tiny)
+    none = copy.copy(tp)
+    none.tiny = [False] * len(tp.tiny)
+    # Normals at 90° − [−0.6°, 1.2°] from a bright centre (a tiny one for half
+    # of them), and random ones.
+    rng = np.random.default_rng(8)
+    n = 100_000
+    centres = np.array([item[2:5] for item in tp.bright])
+    tiny = np.flatnonzero(tp.tiny)
+    centres = centres[np.where(np.arange(n) % 2 == 0, rng.choice(tiny, n), rng.integers(len(centres), size=n))]
+    t = rng.normal(size=(n, 3))
+    t -= (t * centres).sum(1, keepdims=True) * centres
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    e = rng.uniform(-0.01, 0.02, (n, 1))
+    normals = np.concatenate([t * np.sqrt(1 - e * e) + centres * e, rng.normal(size=(n, 3))])
+    normals = [mi.Float(normals[:, k].astype(np.float32)) for k in range(3)]
+    band, reference, without = (np.array(p.point(*normals)["band"]) for p in (tp, every, none))
+    assert np.array_equal(band, reference)
+    print(f"tiny {sum(tp.tiny)} of {len(tp.tiny)}; bands changed without them: {(band != without).sum()} of {len(band)}")
+    assert (band != without).sum() > 0
 
 
 def arriving(rng, n):
