@@ -278,13 +278,18 @@ def _emitter_class(mi):
             except ValueError as e:
                 raise ValueError(f'envlight emitter: "{self.name}": {e}') from e
             if self.tables.jit:
-                self.tables.texels = self.m_data.array
+                self.tables.set_texels(self.m_data.array)
             if spectral:
                 # Each texel's spectrum, upsampled as envmap upsamples it (constants:
                 # in spectral variants eval is not differentiable in the map).
                 coefficients = _srgb_coefficients(mi, variant, mv, rgb)
-                columns = [np.ascontiguousarray(coefficients[:, k]) for k in range(4)]
-                self.spectra = [mv.Float(c) for c in columns] if self.tables.jit else columns
+                if self.tables.jit:
+                    # The three model coefficients and the scale of each texel, read
+                    # as one packet by the lookup (constants: see above).
+                    flat = mv.Float(np.ascontiguousarray(coefficients, np.float32).reshape(-1))
+                    self.spectra = self.tables.bordered_texture(flat, 4)
+                else:
+                    self.spectra = [np.ascontiguousarray(coefficients[:, k]) for k in range(4)]
 
         def traverse(self, callback):
             super().traverse(callback)
@@ -480,10 +485,6 @@ def _emitter_class(mi):
             colour = mv.Color3f(rgb[0], rgb[1], rgb[2])
             return mv.UnpolarizedSpectrum(mv.luminance(colour)) if mono else colour
 
-        def _gather_spectrum(self, k, index):
-            if self.tables.jit:
-                return dr.gather(mv.Float, self.spectra[k], index)
-            return float(self.spectra[k][int(index)])
 
         def _spectrum(self, d_world, wavelengths, active, whitepoint=True):
             """Spectral radiance (scale not applied) arriving from ``d_world`` at
@@ -492,13 +493,16 @@ def _emitter_class(mi):
             way, times D65 unless ``whitepoint`` is False."""
             tables = self.tables
             u, v, _ = tables.local_to_uv(*tables.to_light(*self._to_light(d_world)))
-            width = tables.p["image_width"]
+            if tables.jit:
+                texels = tables.fetch(self.spectra, u, v)
+            else:
+                width = tables.p["image_width"]
+                texels = [(tuple(float(c[int(y * width + x)]) for c in self.spectra), weight)
+                          for x, y, weight in tables.lookup_texels(u, v)]
             shape, scale = None, None
-            for x, y, weight in tables.lookup_texels(u, v):
-                i = y * width + x
-                coefficients = mv.Vector3f(*(self._gather_spectrum(k, i) for k in range(3)))
-                term = mv.srgb_model_eval(coefficients, wavelengths) * weight
-                size = self._gather_spectrum(3, i) * weight
+            for values, weight in texels:
+                term = mv.srgb_model_eval(mv.Vector3f(*values[:3]), wavelengths) * weight
+                size = values[3] * weight
                 shape = term if shape is None else shape + term
                 scale = size if scale is None else scale + size
             total = shape * (scale * tables.scale)

@@ -29,7 +29,7 @@ import drjit as dr  # noqa: E402
 import envlight  # noqa: E402
 import envlight.mitsuba  # noqa: E402
 from envlight._drjit_product import TableProduct  # noqa: E402
-from envlight._drjit_tables import TableLight  # noqa: E402
+from envlight._drjit_tables import MAPPING_EQUAL_AREA, MAPPING_EQUIRECT, TableLight  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SUNRISE = ROOT.parent / "shared" / "envmaps" / "sunrise.exr"
@@ -302,6 +302,52 @@ def arriving(rng, n):
 
 def emitter(rgb, **params):
     return mi.load_dict({"type": "envlight", "bitmap": mi.Bitmap(rgb), **params})
+
+
+LOOKUP_CASES = [
+    ((32, 64), {}),
+    ((32, 64), {"lookup": "nearest"}),
+    ((32, 64), {"lookup": "node"}),
+    ((32, 32), {"mapping": "equal-area"}),
+    ((32, 32), {"mapping": "equal-area", "lookup": "nearest"}),
+    ((1, 1), {}),
+    ((1, 5), {"lookup": "node"}),
+    ((7, 1), {}),
+    ((2, 3), {"mapping": "equal-area"}),
+]
+
+
+@pytest.mark.parametrize("shape,options", LOOKUP_CASES, ids=lambda c: str(c))
+def test_texture_lookup_equals_the_texel_gathers(shape, options):
+    """In JIT variants the radiance lookup reads its texels from a bordered texture
+    (``TableLight.bordered_texture``): the same radiance, bit for bit, as gathering
+    each texel's channels, at points all over and beyond [0, 1]² and on its edges;
+    for a bilinear lookup, a border laid out for the other kind of u axis is caught."""
+    llvm()
+    rng = np.random.default_rng(11)
+    h, w = shape
+    light = envlight.EnvironmentLight.from_array(rng.uniform(0, 10, (h, w, 3)).astype(np.float32), **options)
+    tl = TableLight(light.gpu_tables(), mi)
+    n = 100_000
+    u = rng.uniform(-0.1, 1.1, n).astype(np.float32)
+    v = rng.uniform(-0.1, 1.1, n).astype(np.float32)
+    u[:8] = [0, 1, 0.5, np.nextafter(np.float32(1), 0), 0, 1, 0, 1]
+    v[:8] = [0, 0, 0.5, 1, 1, 1, 1e-7, np.nextafter(np.float32(1), 0)]
+    u, v = mi.Float(u), mi.Float(v)
+    fetched = np.array(tl.lookup(u, v))
+    texture = tl.texture
+    tl.texture = None
+    gathered = np.array(tl.lookup(u, v))
+    assert np.array_equal(fetched, gathered)
+    if w > 1 and options.get("lookup") != "nearest":
+        # The other axis's border: the seam (or the edge columns) blend wrong texels
+        # (the nearest lookup reads no border).
+        mapping = tl.p["mapping"]
+        tl.p["mapping"] = MAPPING_EQUIRECT if mapping == MAPPING_EQUAL_AREA else MAPPING_EQUAL_AREA
+        tl.texture = tl.bordered_texture(tl.texels, 3)
+        tl.p["mapping"] = mapping
+        assert not np.array_equal(np.array(tl.lookup(u, v)), gathered)
+    tl.texture = texture
 
 
 def test_emitter_queries_equal_the_cpu_in_mitsubas_frame(variant):
