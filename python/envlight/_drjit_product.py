@@ -506,12 +506,8 @@ class TableProduct:
 
     def _place(self, axis, cell, x):
         """``Fine::place``: x rounded to f32, then moved by ulps (at most 4) into `cell`."""
-        light = self.light
         p = dr.clip(self._f32(x), 0.0, float(np.float32(1.0) - np.float32(2.0**-24)))
-        for _ in range(4):
-            at = self._cell_axis(p, axis)
-            p = dr.select(at < cell, light._next_up(p), dr.select(at > cell, light._next_down(p), p))
-        return p
+        return self.light.into_cell(p, cell, lambda p: self._cell_axis(p, axis))
 
     def _axis_fraction(self, x, i, n, rows):
         """Where x lies in bilinear cell i of an axis of n texels, in [0, 1] (f32):

@@ -241,9 +241,14 @@ class TableLight:
 
     def _nudge_into_cell(self, x, cell, n):
         """Moves x (within a few ulps of cell `cell` of n) into that cell, and below 1."""
-        x = dr.minimum(x, ONE_MINUS_EPSILON)
+        return self.into_cell(dr.minimum(x, ONE_MINUS_EPSILON), cell, lambda p: self._cell_index(p, n))
+
+    def into_cell(self, x, cell, cell_of):
+        """x moved by ulps, at most 4, towards cell `cell` until ``cell_of`` finds it
+        there (f32): a point that a rounding moved out of its cell, put back.
+        (Unrolled: a symbolic loop that packets leave at once was no faster.)"""
         for _ in range(4):
-            c = self._cell_index(x, n)
+            c = cell_of(x)
             x = dr.select(c > cell, self._next_down(x), dr.select(c < cell, self._next_up(x), x))
         return x
 

@@ -240,6 +240,52 @@ def test_product_tables_equal_the_cpu_row_for_row(variant, options):
         assert (relative(again, pdf)[pdf > 0] < 1e-5).all()
 
 
+@pytest.mark.parametrize("options", [{}, {"lookup": "node", "density": "piecewise-bilinear"},
+                                     {"density": "piecewise-constant"}], ids=["bilinear", "node", "constant"])
+def test_points_rounded_out_of_their_cell_are_moved_back(options):
+    """Placing a sampled point (``Fine::place``; ``_nudge_into_cell`` for texels):
+    where rounding to f32 takes a point of cell c into a neighbour, it is moved back
+    by ulps. Every point on and within 10⁻⁹ of each cell's edges, on both axes, ends
+    in its cell, at the f32 nearest its rounded value there (one ulp back towards
+    that value leaves the cell); and some of them had to move."""
+    llvm()
+    light = envlight.EnvironmentLight.from_array(sky(), **options)
+    tp = product_port(light)
+    moved = 0
+    for axis, n in ((0, tp.iw), (1, tp.ih)):
+        if tp.bilinear:
+            edges = tp._layout(n, axis == 1 and tp.node_rows)
+        else:
+            edges = np.arange(n + 1, dtype=np.float64) / n
+        xs, cells = [], []
+        for c in range(len(edges) - 1):
+            lo, hi = edges[c], edges[c + 1]
+            if hi <= lo:
+                continue
+            for x in (lo, lo + 1e-12, lo + 1e-10, lo + 1e-9, hi - 1e-9, hi - 1e-10, hi - 1e-12):
+                if lo <= x < hi and x < 1.0:
+                    xs.append(x)
+                    cells.append(c)
+        xs, cells = np.array(xs), np.array(cells, np.uint32)
+        rounded = np.minimum(xs.astype(np.float32), np.float32(1.0) - np.float32(2.0**-24))
+        if tp.bilinear:
+            placed = np.array(tp._place(axis, mi.UInt32(cells), mi.Float64(xs)), np.float32)
+
+            def cell_of(p):
+                return np.array(tp._cell_axis(mi.Float(p), axis))
+        else:
+            placed = np.array(tp.light._nudge_into_cell(mi.Float(rounded), mi.UInt32(cells), n), np.float32)
+
+            def cell_of(p):
+                return np.array(tp.light._cell_index(mi.Float(p), n))
+        assert np.array_equal(cell_of(placed), cells)
+        away = placed != rounded
+        back = np.nextafter(placed[away], rounded[away])
+        assert (cell_of(back) != cells[away]).all()
+        moved += int(away.sum())
+    assert moved > 0
+
+
 def test_a_wrong_product_table_is_rejected(variant):
     """The product's row-for-row check fails on the tables of a slightly different light."""
     rgb = sky()
