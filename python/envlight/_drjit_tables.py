@@ -157,7 +157,7 @@ class TableLight:
 
         Why a texture: ``Texture2f.eval_fetch`` reads each texel's channels as one
         packet, where a gather per channel costs more (the RGB lookup alone about
-        1.5×, and 0.05–0.15 of a whole render's time in light sampling)."""
+        1.4×, and 0.05–0.19 of a whole render's time in light sampling)."""
         mi, U = self.mi, self.mi.UInt32
         w, h = self.p["image_width"], self.p["image_height"]
         # Entry j of the bordered texels: channel c of texel k = (row, column).

@@ -485,7 +485,6 @@ def _emitter_class(mi):
             colour = mv.Color3f(rgb[0], rgb[1], rgb[2])
             return mv.UnpolarizedSpectrum(mv.luminance(colour)) if mono else colour
 
-
         def _spectrum(self, d_world, wavelengths, active, whitepoint=True):
             """Spectral radiance (scale not applied) arriving from ``d_world`` at
             ``wavelengths``, as envmap evaluates it: the lookup's texels' model
