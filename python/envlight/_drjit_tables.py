@@ -144,11 +144,12 @@ class TableLight:
         triples, row by row (in JIT variants a Dr.Jit ``Float``, which may carry
         gradients: the lookups are differentiable in it)."""
         self.texels = texels
-        self.texture = self.bordered_texture(texels, 3) if self.jit else None
+        self.texture = self.bordered_texture(texels, 3)
 
     def bordered_texture(self, values, channels):
-        """A Dr.Jit texture (JIT variants) over a flat array of `channels` values
-        per texel of the map, row by row, for ``fetch``: the texels with a
+        """What ``fetch`` reads the lookup's texels from, given a flat array of
+        `channels` values per texel of the map, row by row. In scalar variants the
+        array itself. In JIT variants a Dr.Jit texture over the texels with a
         one-texel border, laid out so that each pair of texels a lookup blends
         sits side by side (along u the last column before the first and the first
         after the last on a periodic axis, the equirectangular mapping's, each
@@ -158,6 +159,8 @@ class TableLight:
         Why a texture: ``Texture2f.eval_fetch`` reads each texel's channels as one
         packet, where a gather per channel costs more (the RGB lookup alone about
         1.4×, and 0.05–0.19 of a whole render's time in light sampling)."""
+        if not self.jit:
+            return values, channels
         mi, U = self.mi, self.mi.UInt32
         w, h = self.p["image_width"], self.p["image_height"]
         # Entry j of the bordered texels: channel c of texel k = (row, column).
@@ -191,17 +194,6 @@ class TableLight:
         if self.jit:
             return dr.gather(self.mi.Float, self.nodes, index)
         return float(self.nodes[int(index)])
-
-    def _texel(self, x, y, active=True):
-        i = (y * self.p["image_width"] + x) * 3
-        if self.jit:
-            F = self.mi.Float
-            return (dr.gather(F, self.texels, i, active), dr.gather(F, self.texels, i + 1, active),
-                    dr.gather(F, self.texels, i + 2, active))
-        if not active:
-            return (0.0, 0.0, 0.0)
-        i = int(i)
-        return (float(self.texels[i]), float(self.texels[i + 1]), float(self.texels[i + 2]))
 
     def _next_up(self, x):
         if self.jit:
@@ -609,10 +601,15 @@ class TableLight:
         """The lookup at image point (u, v) over a ``bordered_texture``: a list of
         ``(values, weight)``, as ``lookup_texels`` lists the texels (four for the
         bilinear lookups, one for the nearest), each texel's channels read from
-        the texture's 2×2 block that starts at it."""
+        the texture's 2×2 block that starts at it (scalar variants: from the
+        array, texel by texel)."""
         mi = self.mi
         w, h = self.p["image_width"], self.p["image_height"]
         texels = self.lookup_texels(u, v)
+        if not self.jit:
+            values, channels = texture
+            return [(tuple(float(values[(int(y) * w + int(x)) * channels + c]) for c in range(channels)), weight)
+                    for x, y, weight in texels]
         (x0, y0, _), (x1, y1) = texels[0], (texels[-1][0], texels[-1][1])
         if len(texels) == 1:
             x1, y1 = x0 + 1, y0 + 1
@@ -629,10 +626,7 @@ class TableLight:
 
     def lookup(self, u, v):
         """Radiance at image point (u, v), scale applied."""
-        if self.texture is not None:
-            texels = self.fetch(self.texture, u, v)
-        else:
-            texels = [(self._texel(x, y), weight) for x, y, weight in self.lookup_texels(u, v)]
+        texels = self.fetch(self.texture, u, v)
         if len(texels) == 1:
             return tuple(dr.minimum(c * self.scale, F32_MAX) for c in texels[0][0])
         (a, wa), (b, wb), (c, wc), (d, wd) = texels

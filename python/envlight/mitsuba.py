@@ -280,16 +280,11 @@ def _emitter_class(mi):
             if self.tables.jit:
                 self.tables.set_texels(self.m_data.array)
             if spectral:
-                # Each texel's spectrum, upsampled as envmap upsamples it (constants:
-                # in spectral variants eval is not differentiable in the map).
-                coefficients = _srgb_coefficients(mi, variant, mv, rgb)
-                if self.tables.jit:
-                    # The three model coefficients and the scale of each texel, read
-                    # as one packet by the lookup (constants: see above).
-                    flat = mv.Float(np.ascontiguousarray(coefficients, np.float32).reshape(-1))
-                    self.spectra = self.tables.bordered_texture(flat, 4)
-                else:
-                    self.spectra = [np.ascontiguousarray(coefficients[:, k]) for k in range(4)]
+                # Each texel's spectrum, upsampled as envmap upsamples it: the model's
+                # three coefficients and the scale, read together by the lookup
+                # (constants: in spectral variants eval is not differentiable in the map).
+                flat = np.ascontiguousarray(_srgb_coefficients(mi, variant, mv, rgb), np.float32).reshape(-1)
+                self.spectra = self.tables.bordered_texture(mv.Float(flat) if self.tables.jit else flat, 4)
 
         def traverse(self, callback):
             super().traverse(callback)
@@ -492,14 +487,8 @@ def _emitter_class(mi):
             way, times D65 unless ``whitepoint`` is False."""
             tables = self.tables
             u, v, _ = tables.local_to_uv(*tables.to_light(*self._to_light(d_world)))
-            if tables.jit:
-                texels = tables.fetch(self.spectra, u, v)
-            else:
-                width = tables.p["image_width"]
-                texels = [(tuple(float(c[int(y * width + x)]) for c in self.spectra), weight)
-                          for x, y, weight in tables.lookup_texels(u, v)]
             shape, scale = None, None
-            for values, weight in texels:
+            for values, weight in tables.fetch(self.spectra, u, v):
                 term = mv.srgb_model_eval(mv.Vector3f(*values[:3]), wavelengths) * weight
                 size = values[3] * weight
                 shape = term if shape is None else shape + term
